@@ -48,9 +48,7 @@ class Signals:
         for name, values in channels.items():
             arr = np.array(values, dtype=np.float64)
             if arr.shape != t.shape:
-                raise SignalError(
-                    f"channel {name!r} has {arr.size} samples, time has {t.size}"
-                )
+                raise SignalError(f"channel {name!r} has {arr.size} samples, time has {t.size}")
             _require_finite(name, arr)
             arr.setflags(write=False)
             data[name] = arr
@@ -90,8 +88,10 @@ class Signals:
     def stack(self, names: Sequence[str]) -> np.ndarray:
         """The channels ``names`` as columns of an ``(n, len(names))`` array."""
         self.require(names)
-        return np.column_stack([self.channels[n] for n in names]) if names else np.empty(
-            (len(self), 0)
+        return (
+            np.column_stack([self.channels[n] for n in names])
+            if names
+            else np.empty((len(self), 0))
         )
 
     def sample_period(self, *, tolerance: float = 0.01) -> float:
