@@ -104,8 +104,9 @@ def describe_validation_error(exc: ValidationError) -> str:
     """One line per problem: ``field.path: message``."""
     parts = []
     for err in exc.errors():
-        loc = ".".join(str(p) for p in err["loc"]) or "config"
-        parts.append(f"{loc}: {err['msg']}")
+        message = err["msg"].removeprefix("Value error, ")
+        loc = ".".join(str(p) for p in err["loc"])
+        parts.append(f"{loc}: {message}" if loc else message)
     return "; ".join(parts)
 
 

@@ -6,11 +6,12 @@ increasing finite time, equal lengths, finite values, required channels present.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Mapping, Sequence
 
 import numpy as np
 
-from estimation.errors import SignalError
+from estimation.errors import ConfigError, SignalError
 
 
 class Signals:
@@ -129,3 +130,20 @@ def _require_finite(name: str, arr: np.ndarray) -> None:
     if not np.all(np.isfinite(arr)):
         k = int(np.argmax(~np.isfinite(arr)))
         raise SignalError(f"channel {name!r} has a non-finite value ({arr[k]}) at sample {k}")
+
+
+def delay_samples(delay_s: float, sample_period_s: float) -> int:
+    """A transport delay in whole samples: ``floor(τ/Ts + 1/2)`` (ties round up).
+
+    A tolerance of 1e-6 samples absorbs floating-point noise in ``Ts``, so the NOx case's
+    0.75 s at 50 Hz is 38 samples however the time base was built (SKF (34) gives τ in
+    seconds although its model (2) needs whole samples).
+
+    >>> delay_samples(0.75, 0.02)
+    38
+    """
+    if sample_period_s <= 0.0:
+        raise ConfigError(f"sample period must be > 0 s, got {sample_period_s!r}")
+    if delay_s < 0.0:
+        raise ConfigError(f"delay must be >= 0 s, got {delay_s!r}")
+    return math.floor(delay_s / sample_period_s + 0.5 + 1e-6)

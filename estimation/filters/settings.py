@@ -9,6 +9,7 @@ import numpy as np
 
 from estimation.errors import ConfigError
 from estimation.filters.config import SensorConfig, TableFilterConfig
+from estimation.signals import delay_samples as seconds_to_samples
 from estimation.table import Axis, Grid, Table, broadcast_cells
 
 
@@ -95,4 +96,4 @@ def delay_samples(sensor: SensorConfig, sample_period_s: float | None) -> int:
         return 0
     if sample_period_s is None:
         raise ConfigError("sensor.delay_s needs a uniformly sampled time base")
-    return round(sensor.delay_s / sample_period_s)
+    return seconds_to_samples(sensor.delay_s, sample_period_s)

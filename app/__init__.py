@@ -1,0 +1,1 @@
+"""mapwise application layer: command line, file I/O (and, later, the web service)."""

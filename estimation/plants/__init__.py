@@ -1,0 +1,1 @@
+"""Ground-truth plants: simulators that return measured signals together with their truth."""
