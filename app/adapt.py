@@ -142,10 +142,14 @@ def map_document(
     table = snapshot.table
     assert table is not None
     rejected = {k: int(v) for k, v in snapshot.rejected.items()}
-    timing = {"estimate_s": estimate_s} if load_s is None else {
-        "load_s": load_s,
-        "estimate_s": estimate_s,
-    }
+    timing = (
+        {"estimate_s": estimate_s}
+        if load_s is None
+        else {
+            "load_s": load_s,
+            "estimate_s": estimate_s,
+        }
+    )
     return {
         "estimator": snapshot.estimator,
         "axes": [a.to_dict() for a in table.axes],

@@ -47,7 +47,8 @@ def sskf_kernel(
     d = 0
     while (1 << d) < nc:
         d += 1
-    eta = np.empty(d)
+    k_lower = np.empty(d)
+    k_upper = np.empty(d)
     for k in range(n):
         yhat = 0.0
         sw = 0.0
@@ -67,19 +68,20 @@ def sskf_kernel(
             continue  # every active cell is locked: nothing may change
         r = sigma_v2 / sw
         for a in range(d):
-            acc = 0.0
+            eta = 0.0
             for c in range(nc):
                 if (c >> (d - 1 - a)) & 1:
-                    acc += w[k, c]
-            eta[a] = min(max(acc, 0.0), 1.0)
+                    eta += w[k, c]
+            eta = min(max(eta, 0.0), 1.0)
+            k_lower[a] = sskf_gain_1d(eta, r)
+            k_upper[a] = sskf_gain_1d(1.0 - eta, r)
         for c in range(nc):
             j = idx[k, c]
             if locked[j]:
                 continue
             gain = 1.0
             for a in range(d):
-                upper = (c >> (d - 1 - a)) & 1
-                gain *= sskf_gain_1d(1.0 - eta[a] if upper else eta[a], r)
+                gain *= k_upper[a] if (c >> (d - 1 - a)) & 1 else k_lower[a]
             theta[j] += gain * e
 
 

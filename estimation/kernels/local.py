@@ -17,10 +17,11 @@ import numpy as np
 from estimation.kernels.kalman import ACCEPTED, REJECTED_GATE, REJECTED_MASK, _cap_row_col
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _switch_active(
     k_step: int,
-    new: np.ndarray,
+    idx: np.ndarray,
+    k: int,
     active: np.ndarray,
     var: np.ndarray,
     last: np.ndarray,
@@ -32,7 +33,7 @@ def _switch_active(
     pos_old: np.ndarray,
     scratch: np.ndarray,
 ) -> None:
-    """Move the local system from the elements ``active`` to ``new`` at step ``k_step``.
+    """Move the local system from the elements ``active`` to ``idx[k]`` at step ``k_step``.
 
     Leaving elements write their variance back to ``var`` (aged through ``k_step − 1``);
     entering ones are aged lazily for the steps they missed (capped at ``P0`` with ``limit``;
@@ -40,47 +41,48 @@ def _switch_active(
     the covariance of a pair is kept only if both elements are in the old and the new set
     (SKF §5.2). ``y_M`` (last row/column) is always active.
     """
-    nc = new.shape[0]
+    nc = active.shape[0]
+    na = Pa.shape[0]
     for c in range(nc):
         pos_old[c] = -1
-        for c2 in range(nc):
-            if active[c2] == new[c]:
-                pos_old[c] = c2
-                break
     for c2 in range(nc):
         j = active[c2]
         if j < 0:
             continue
-        stays = False
+        leaving = True
         for c in range(nc):
-            if new[c] == j:
-                stays = True
+            if idx[k, c] == j:
+                pos_old[c] = c2
+                leaving = False
                 break
-        if not stays:
+        if leaving:
             var[j] = Pa[c2, c2]
             last[j] = k_step - 1
-    na = Pa.shape[0]
-    scratch[:, :] = 0.0
     for c in range(nc):
         oc = pos_old[c]
         if oc >= 0:
             for c2 in range(nc):
-                if pos_old[c2] >= 0:
-                    scratch[c, c2] = Pa[oc, pos_old[c2]]
+                oc2 = pos_old[c2]
+                scratch[c, c2] = Pa[oc, oc2] if oc2 >= 0 else 0.0
             if has_sensor:
                 scratch[c, na - 1] = Pa[oc, na - 1]
-                scratch[na - 1, c] = Pa[na - 1, oc]
         else:
-            j = new[c]
+            for c2 in range(na):
+                scratch[c, c2] = 0.0
+            j = idx[k, c]
             aged = var[j] + sigma_w2[j] * (k_step - 1 - last[j])
             if limit and aged > p0[j]:
                 aged = p0[j]
             scratch[c, c] = aged
     if has_sensor:
+        for c in range(nc):
+            scratch[na - 1, c] = scratch[c, na - 1]
         scratch[na - 1, na - 1] = Pa[na - 1, na - 1]
-    Pa[:, :] = scratch
+    for c in range(na):
+        for c2 in range(na):
+            Pa[c, c2] = scratch[c, c2]
     for c in range(nc):
-        active[c] = new[c]
+        active[c] = idx[k, c]
 
 
 @nb.njit(cache=True)
@@ -143,7 +145,8 @@ def local_kernel(
         if changed:
             _switch_active(
                 step0 + k,
-                idx[k],
+                idx,
+                k,
                 active,
                 var,
                 last,

@@ -1,0 +1,11 @@
+#!/usr/bin/env bash
+# Install mapwise with its test dependencies into ./.venv, then lint and run the whole suite.
+# Extra arguments go to pytest (e.g. scripts/test.sh -k skf).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+python3 -m venv .venv
+.venv/bin/python -m pip install --quiet --upgrade pip
+.venv/bin/python -m pip install --quiet -e '.[test]'
+.venv/bin/ruff check .
+.venv/bin/ruff format --check .
+.venv/bin/pytest "$@"
