@@ -62,8 +62,9 @@ class TableFilter:
         with the operating point ``u[i]`` and is accepted only if both samples are.
         """
         signals.require(self.required_signals())
-        has_sensor = getattr(self.config, "sensor", None) is not None
-        period = signals.sample_period() if has_sensor and len(signals) > 1 else None
+        sensor = getattr(self.config, "sensor", None)
+        needs_period = sensor is not None and sensor.delay_samples is None and sensor.delay_s
+        period = signals.sample_period() if needs_period and len(signals) > 1 else None
         settings = resolve_settings(self.config, self.grid, sample_period_s=period)
         n = len(signals)
         tau = settings.delay
