@@ -178,3 +178,19 @@ def _with_line(message: str, lines: list[int]) -> str:
     if match and int(match[1]) < len(lines):
         return message.replace(match[0], f"at line {lines[int(match[1])]}")
     return message
+
+
+def write_csv(signals: Signals, path: str | Path, *, time_column: str = "time") -> None:
+    """Write a log readable by :func:`read_csv`: header ``name [unit]``, time first, values
+    with 17 significant digits (they round-trip exactly)."""
+    names = signals.names
+    if time_column in names:
+        raise LogFormatError(f"a channel is already called {time_column!r}")
+    header = [f"{time_column} [s]"] + [
+        f"{n} [{signals.units[n]}]" if signals.units.get(n) else n for n in names
+    ]
+    columns = np.column_stack([signals.time, *(signals[n] for n in names)])
+    with Path(path).open("w", newline="") as f:
+        writer = csv.writer(f, lineterminator="\n")
+        writer.writerow(header)
+        writer.writerows([[repr(float(v)) for v in row] for row in columns])

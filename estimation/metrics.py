@@ -1,0 +1,102 @@
+"""Metrics shared by all runs (ALGORITHMS.md §7).
+
+Map metrics compare an estimated table with the true one on the cells the data excited;
+output metrics summarise an error series; torque metrics are TQ (60)–(62).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from estimation.errors import ShapeError
+from estimation.table import Table
+
+
+def cell_visits(table: Table, U: np.ndarray) -> np.ndarray:
+    """Accumulated interpolation weight of every cell over the inputs ``U`` (table shape).
+
+    A cell's visit count is the number of samples' worth of weight it received; a sample in
+    the middle of a 2-D cell gives each of its four corners 0.25.
+    """
+    idx, w = table.regressor(U)
+    return np.bincount(idx.ravel(), weights=w.ravel(), minlength=table.size).reshape(table.shape)
+
+
+def map_metrics(
+    estimate: Table, truth: Table, U: np.ndarray, *, min_visits: float = 1.0
+) -> dict[str, float]:
+    """How well ``estimate`` matches ``truth`` where the operating points ``U`` went.
+
+    * ``rmse``, ``max_abs_error`` — over the visited cells (accumulated weight ≥ ``min_visits``),
+      in the table's unit;
+    * ``mean_relative_error`` — LPV §4 as defined in ALGORITHMS.md §3, robust where the map
+      crosses zero: ``Σ_k |T̂(υ_k) − T(υ_k)| / Σ_k |T(υ_k)|`` along the trajectory;
+    * ``coverage`` — fraction of cells visited; ``visited_cells`` their number.
+    """
+    if estimate.shape != truth.shape or any(
+        not np.array_equal(a.breakpoints, b.breakpoints)
+        for a, b in zip(estimate.axes, truth.axes, strict=True)
+    ):
+        raise ShapeError("estimate and truth must share the same grid")
+    visited = cell_visits(truth, U) >= min_visits
+    error = estimate.values - truth.values
+    along = np.abs(estimate.evaluate(U) - truth.evaluate(U))
+    scale = float(np.sum(np.abs(truth.evaluate(U))))
+    n_visited = int(visited.sum())
+    return {
+        "rmse": float(np.sqrt(np.mean(error[visited] ** 2))) if n_visited else float("nan"),
+        "max_abs_error": float(np.max(np.abs(error[visited]))) if n_visited else float("nan"),
+        "mean_relative_error": float(np.sum(along) / scale) if scale > 0 else float("nan"),
+        "coverage": n_visited / truth.size,
+        "visited_cells": float(n_visited),
+    }
+
+
+def output_metrics(error: np.ndarray) -> dict[str, float]:
+    """RMSE, mean absolute and maximum absolute value of an error series (NaNs ignored)."""
+    e = np.asarray(error, dtype=np.float64)
+    e = e[np.isfinite(e)]
+    if e.size == 0:
+        return {"rmse": float("nan"), "mae": float("nan"), "max_abs_error": float("nan")}
+    return {
+        "rmse": float(np.sqrt(np.mean(e**2))),
+        "mae": float(np.mean(np.abs(e))),
+        "max_abs_error": float(np.max(np.abs(e))),
+    }
+
+
+def torque_metrics(
+    time_s: np.ndarray, error_nm: np.ndarray, *, window_s: Sequence[float] = (5.0, 30.0)
+) -> dict[str, float]:
+    """TQ (60)–(62) over ``window_s`` (the paper: 5–30 s): ``ISE = ∫ τ̃² dt`` (N²·m²·s, by the
+    rectangle rule on the sample grid), ``MAE = max |τ̃|`` (N·m, the paper's maximum absolute
+    error) and ``SD`` = standard deviation of τ̃ (N·m)."""
+    t = np.asarray(time_s, dtype=np.float64)
+    e = np.asarray(error_nm, dtype=np.float64)
+    if t.shape != e.shape:
+        raise ShapeError(f"time has shape {t.shape}, error {e.shape}")
+    lo, hi = window_s
+    inside = (t >= lo) & (t <= hi)
+    if np.count_nonzero(inside) < 2:
+        raise ShapeError(f"fewer than two samples inside the window {lo}–{hi} s")
+    dt = np.diff(t, append=t[-1] + (t[-1] - t[-2]))
+    ei = e[inside]
+    return {
+        "ise": float(np.sum(ei**2 * dt[inside])),
+        "mae": float(np.max(np.abs(ei))),
+        "sd": float(np.std(ei)),
+    }
+
+
+def convergence_time(time_s: np.ndarray, error: np.ndarray, threshold: float) -> float | None:
+    """First time after which ``error`` stays at or below ``threshold`` (``None`` if never)."""
+    t = np.asarray(time_s, dtype=np.float64)
+    above = np.asarray(error, dtype=np.float64) > threshold
+    if above[-1]:
+        return None
+    if not above.any():
+        return float(t[0])
+    last_above = int(np.nonzero(above)[0][-1])
+    return float(t[last_above + 1])
