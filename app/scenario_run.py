@@ -88,8 +88,7 @@ def run_scenario(
         "timing": {"estimate_s": estimate_s},
     }
     if final.table is not None and data.true_map is not None:
-        U = data.signals.stack(list(data.map_inputs))
-        metrics = map_metrics(final.table, data.true_map, U)
+        metrics = map_metrics(final.table, data.true_map, data.scoring_points())
         residual = final.outputs.get("residual")
         if residual is not None and final.status is not None:
             metrics["output_rmse"] = output_metrics(residual[final.status == 0])["rmse"]

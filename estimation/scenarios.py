@@ -27,7 +27,9 @@ class ScenarioData:
 
     ``true_map`` is the table a map estimator should recover (for a drifting map: its value
     at the end of the record); ``map_inputs`` are the channels of its axes, in order, and
-    ``map_output`` the measured channel the table explains.
+    ``map_output`` the measured channel the table explains (``None`` when the map is only
+    seen through a model, as a MAF error). ``map_points`` are the true operating points
+    ``(n, d)`` the map is scored along; by default the ``map_inputs`` channels.
     """
 
     scenario: str
@@ -37,6 +39,12 @@ class ScenarioData:
     true_map: Table | None = None
     map_inputs: tuple[str, ...] = ()
     map_output: str | None = None
+    map_points: np.ndarray | None = None
+
+    def scoring_points(self) -> np.ndarray:
+        if self.map_points is not None:
+            return self.map_points
+        return self.signals.stack(list(self.map_inputs))
 
 
 @dataclass(frozen=True, slots=True)
@@ -219,6 +227,81 @@ def _nox(name: str, cycle: str, description: str, duration_s: float) -> Scenario
     )
 
 
+# --- LPV and EKF papers: MAF-sensor error maps on the diesel air path --------------------
+
+# The LPV paper's light-duty engine spans u_δ = 0…56 mg/cycle and n_e up to 3000 rpm (LPV §4);
+# the WHTC is denormalised (GTR 4) for an engine of that size: rated 3000 rpm, 280 N·m.
+_LPV_FULL_LOAD_RPM = (800.0, 1000.0, 1250.0, 1500.0, 1750.0, 2500.0, 3000.0, 3250.0, 3500.0)
+_LPV_FULL_LOAD_NM = (118.0, 162.0, 221.0, 263.0, 280.0, 280.0, 255.0, 126.0, 0.0)
+
+
+def _maf(name: str, cycle: str, kind: str, description: str, duration_s: float) -> Scenario:
+    rate_hz = 10.0
+
+    def build(seed: int, duration: float | None) -> ScenarioData:
+        from estimation.cycles import load_cycle
+        from estimation.plants.airpath import MafErrorSpec, simulate_airpath
+        from estimation.vehicle import DieselEngine, operating_points
+
+        engine = None
+        if cycle == "whtc":
+            engine = DieselEngine(
+                rated_speed_rpm=3000.0,
+                full_load_speed_rpm=_LPV_FULL_LOAD_RPM,
+                full_load_torque_nm=_LPV_FULL_LOAD_NM,
+            )
+        points = operating_points(load_cycle(cycle), rate_hz=rate_hz, engine=engine)
+        stop = points.time_s.size if duration is None else int(duration * rate_hz) + 1
+        spec = MafErrorSpec.additive_2d() if kind == "2d" else MafErrorSpec.relative_1d()
+        signals, truth = simulate_airpath(
+            points.time_s[:stop],
+            points.fuel_mg_per_cycle[:stop],
+            points.speed_rpm[:stop],
+            seed=seed,
+            maf_error=spec,
+            rate_hz=rate_hz,
+        )
+        true_map = spec.table
+        assert true_map is not None
+        if kind == "2d":
+            inputs: tuple[str, ...] = ("fuel_mg_per_cycle", "speed_rpm")
+            points_true = signals.stack(list(inputs))
+        else:
+            inputs = ("maf_kg_s",)
+            points_true = truth["w_c_kg_s"][:, None]
+        return ScenarioData(
+            scenario=name,
+            seed=seed,
+            signals=signals,
+            truth=truth.to_dict(),
+            true_map=true_map,
+            map_inputs=inputs,
+            map_output=None,
+            map_points=points_true,
+        )
+
+    suggested = ("lpv",) if kind == "2d" else ("ekf-map", "ekf-aug", "ekf-def")
+    return Scenario(
+        name=name,
+        description=description,
+        rate_hz=rate_hz,
+        duration_s=duration_s,
+        channels=(
+            ("fuel_mg_per_cycle", "mg/cycle"),
+            ("speed_rpm", "rpm"),
+            ("p_im_pa", "Pa"),
+            ("p_em_pa", "Pa"),
+            ("omega_t_rad_s", "rad/s"),
+            ("maf_kg_s", "kg/s"),
+            ("u_egr_pct", "%"),
+            ("u_vgt_pct", "%"),
+        ),
+        suggested=suggested,
+        builder=build,
+        configs=lambda estimator: {},
+    )
+
+
 def _catalog() -> dict[str, Scenario]:
     scenarios = [
         _skf_sim(1),
@@ -236,6 +319,29 @@ def _catalog() -> dict[str, Scenario]:
             "nedc",
             "The same NOx map and sensor on the slow NEDC: poorer excitation (SKF §6.4).",
             1180.0,
+        ),
+        _maf(
+            "maf-whtc",
+            "whtc",
+            "2d",
+            "2.0 L diesel air path (EGR, VGT) on the WHTC (standing in for the ETC) with an "
+            "additive MAF error map ΔW_c(u_δ, n_e) on the LPV grid 0:4:56 mg × 0:250:3000 rpm.",
+            1800.0,
+        ),
+        _maf(
+            "maf-ftp75",
+            "ftp75",
+            "2d",
+            "The same air path and MAF error map on the FTP-75 (LPV §4's second case).",
+            1874.0,
+        ),
+        _maf(
+            "maf-1d-whtc",
+            "whtc",
+            "1d",
+            "The air path on the WHTC with a relative MAF error W_meas = (1 + q(W))·W, q a 1-D "
+            "map over W (EKF (6), §5).",
+            1800.0,
         ),
     ]
     return {s.name: s for s in scenarios}
