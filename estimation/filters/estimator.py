@@ -51,6 +51,7 @@ class TableFilter:
         self.config = config
         self.grid = grid_of(config)
         self.theta0 = initial_table(config)
+        resolve_settings(config, self.grid)  # fail on bad per-cell values before any data
 
     def required_signals(self) -> list[str]:
         return [a.name for a in self.config.axes] + [self.config.output]
@@ -64,7 +65,9 @@ class TableFilter:
         signals.require(self.required_signals())
         sensor = getattr(self.config, "sensor", None)
         needs_period = sensor is not None and sensor.delay_samples is None and sensor.delay_s
-        period = signals.sample_period() if needs_period and len(signals) > 1 else None
+        if needs_period and len(signals) < 2:
+            raise ConfigError("sensor.delay_s needs at least two samples to know the rate")
+        period = signals.sample_period() if needs_period else None
         settings = resolve_settings(self.config, self.grid, sample_period_s=period)
         n = len(signals)
         tau = settings.delay

@@ -49,7 +49,12 @@ def initial_table(config: TableFilterConfig) -> Table:
 def resolve_settings(
     config: TableFilterConfig, grid: Grid, *, sample_period_s: float | None = None
 ) -> FilterSettings:
-    """Turn a config into kernel settings; ``sample_period_s`` converts a delay in seconds."""
+    """Turn a config into kernel settings; ``sample_period_s`` converts a delay in seconds.
+
+    Per-cell values are checked here (shape, finiteness, signs), so building an estimator
+    calls this once with ``sample_period_s=None`` to fail before any data is loaded; a delay
+    given in seconds is then resolved to 0 until the log's sample period is known.
+    """
     shape = grid.shape
     locked = np.zeros(grid.size, dtype=np.bool_)
     for cell in config.locked:
@@ -89,11 +94,10 @@ def resolve_settings(
 
 
 def delay_samples(sensor: SensorConfig, sample_period_s: float | None) -> int:
-    """The sensor delay τ in samples: ``delay_samples`` if given, else ``round(delay_s/Ts)``."""
+    """The sensor delay τ in samples: ``delay_samples`` if given, else ``delay_s/Ts`` rounded
+    (0 while the sample period is unknown)."""
     if sensor.delay_samples is not None:
         return int(sensor.delay_samples)
-    if not sensor.delay_s:
+    if not sensor.delay_s or sample_period_s is None:
         return 0
-    if sample_period_s is None:
-        raise ConfigError("sensor.delay_s needs a uniformly sampled time base")
     return seconds_to_samples(sensor.delay_s, sample_period_s)

@@ -39,7 +39,7 @@ class FilterState:
         )
 
     def to_dict(self) -> dict[str, Any]:
-        out: dict[str, Any] = {}
+        out: dict[str, Any] = {"state_class": type(self).__name__}
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
             if isinstance(value, np.ndarray):
@@ -54,6 +54,16 @@ class FilterState:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Self:
+        """Rebuild a state from :meth:`to_dict` output; on the base class, the concrete class
+        named in the data is chosen (as :meth:`load` does)."""
+        saved_class = data.get("state_class")
+        target = STATE_CLASSES.get(str(saved_class)) if saved_class is not None else cls
+        if target is None:
+            raise StateError(f"unknown state class {saved_class!r}")
+        if not issubclass(target, cls):
+            raise StateError(f"saved {target.__name__} cannot be loaded as {cls.__name__}")
+        if target is not cls:
+            return target.from_dict(data)  # type: ignore[return-value]
         names = [f.name for f in dataclasses.fields(cls)]
         missing = [n for n in names if n not in data]
         if missing:

@@ -100,9 +100,10 @@ def nlms_kernel(
     yhat_out: np.ndarray,
     status_out: np.ndarray,
 ) -> None:
-    """Normalised LMS (ALGORITHMS.md §2.4): ``θ_A += μ q e / (qᵀq + ε)``, with ``q`` the
-    active weights of the unlocked cells ("distribute the error over the active cells").
-    The innovation gate uses ``s = σv²``."""
+    """Normalised LMS (ALGORITHMS.md §2.4): ``θ_c += μ q_c e / (qᵀq + ε)`` for each unlocked
+    active cell ("distribute the error over the active cells"). ``qᵀq`` sums over every active
+    cell, locked ones included, so a lone unlocked corner with a tiny weight takes a share of
+    the error, not all of it divided by its weight. The innovation gate uses ``s = σv²``."""
     n = y.shape[0]
     nc = idx.shape[1]
     for k in range(n):
@@ -111,8 +112,7 @@ def nlms_kernel(
         for c in range(nc):
             j = idx[k, c]
             yhat += w[k, c] * theta[j]
-            if not locked[j]:
-                qq += w[k, c] * w[k, c]
+            qq += w[k, c] * w[k, c]
         yhat_out[k] = yhat
         if not accept[k]:
             status_out[k] = REJECTED_MASK
