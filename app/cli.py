@@ -176,6 +176,7 @@ def _simulate_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--duration", type=float, help="simulate only the first S seconds")
     p.add_argument("--out", type=Path, metavar="FILE.csv", help="measured signals")
     p.add_argument("--truth", type=Path, metavar="T.json", help="the truth")
+    p.add_argument("--plot", type=Path, metavar="OUT.html", help="a Plotly page of it all")
     p.add_argument("--json", action="store_true", help="with --list: the catalog as JSON")
     p.set_defaults(handler=_cmd_simulate)
 
@@ -198,22 +199,28 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         return 0
     if not args.scenario:
         raise UsageError("--scenario NAME is required (or --list)")
-    if args.out is None:
-        raise UsageError("--out FILE.csv is required")
+    if args.out is None and args.plot is None:
+        raise UsageError("--out FILE.csv (or --plot OUT.html) is required")
     data = get_scenario(args.scenario).build(seed=args.seed, duration_s=args.duration)
+    written = []
     try:
-        write_csv(data.signals, args.out)
+        if args.out is not None:
+            write_csv(data.signals, args.out)
+            written.append(str(args.out))
         if args.truth is not None:
             truth = {"scenario": data.scenario, "seed": data.seed, **data.truth}
             if data.true_map is not None:
                 truth["true_map"] = data.true_map.to_dict()
             args.truth.write_text(json.dumps(truth) + "\n")
+            written.append(str(args.truth))
+        if args.plot is not None:
+            from app.plots import scenario_page
+
+            scenario_page(data, args.plot)
+            written.append(str(args.plot))
     except OSError as exc:
         raise UsageError(f"{exc.filename}: {exc.strerror}") from None
-    print(
-        f"wrote {args.out} ({len(data.signals)} samples)"
-        + (f" and {args.truth}" if args.truth else "")
-    )
+    print(f"{data.scenario}: {len(data.signals)} samples -> {', '.join(written)}")
     return 0
 
 

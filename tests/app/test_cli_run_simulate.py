@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -14,7 +15,7 @@ from estimation.scenarios import get_scenario, scenarios
 
 EXPECTED_SCENARIOS = {
     "skf-sim1", "skf-sim2", "skf-sim3", "nox-sdmp", "nox-nedc",
-    "maf-whtc", "maf-ftp75", "maf-1d-whtc",
+    "maf-whtc", "maf-ftp75", "maf-1d-whtc", "torque-si", "torque-rig",
 }  # fmt: skip
 
 
@@ -91,7 +92,7 @@ def test_set_reaches_nested_keys_and_is_validated(capsys: pytest.CaptureFixture[
         (["run", "--scenario", "skf-sim1", "--estimator", "nope"], "unknown estimator 'nope'"),
         (["run", "--scenario", "maf-whtc", "--estimator", "kf"], "does not apply"),
         (["run", "--scenario", "skf-sim2", "--estimator", "kf", "--duration", "500"], "duration"),
-        (["simulate", "--scenario", "skf-sim1"], "--out FILE.csv is required"),
+        (["simulate", "--scenario", "skf-sim1"], "--out FILE.csv (or --plot OUT.html)"),
         (["simulate", "--out", "x.csv"], "--scenario NAME is required"),
     ],
 )
@@ -143,6 +144,27 @@ def test_every_scenario_is_seeded_finite_and_carries_its_true_map(name: str) -> 
         assert np.all(np.isfinite(a.signals[channel]))
     differs = any(not np.array_equal(a.signals[n], c.signals[n]) for n in a.signals.names)
     assert differs == (name != "skf-sim2")  # SKF §5.2 is noise-free: nothing to seed
+    assert a.truth
+    json.dumps(a.truth)  # the truth is JSON-able for --truth
+    if name.startswith("torque"):
+        assert a.true_map is None
+        return
     assert a.true_map is not None
     points = a.scoring_points()
     assert points.shape == (len(a.signals), a.true_map.ndim)
+
+
+def test_simulate_plot_is_a_self_contained_page(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    page = tmp_path / "nox.html"
+    code, out, _ = run(
+        ["simulate", "--scenario", "nox-nedc", "--duration", "20", "--plot", str(page)], capsys
+    )
+    assert code == 0
+    assert str(page) in out
+    html = page.read_text()
+    assert not re.search(r"<script[^>]*\bsrc=", html)  # Plotly.js inlined: works offline
+    assert "Plotly.newPlot" in html
+    assert "nox_ppm [ppm]" in html
+    assert "true map with the operating points" in html
