@@ -239,6 +239,48 @@ def exact_steady_gain(q: np.ndarray, r: float, *, tol: float = 1e-13) -> np.ndar
     return gain
 
 
+def simulators() -> dict[str, dict[str, float]]:
+    """Wall time of each ground-truth generator over a full record (compiled, best of 3)."""
+    from estimation.cycles import load_cycle
+    from estimation.plants.airpath import simulate_airpath
+    from estimation.plants.nox import simulate_nox
+    from estimation.plants.torque import simulate_si_torque
+    from estimation.vehicle import operating_points
+
+    wltc = load_cycle("wltc3b")
+    points = operating_points(wltc, rate_hz=50.0)
+    fuel = np.minimum(points.fuel_mg_per_cycle, 56.0)
+    speed = np.minimum(points.speed_rpm, 3000.0)
+    cases: dict[str, tuple[Callable[[], object], float, float]] = {
+        "vehicle model, WLTC 1800 s at 50 Hz": (
+            lambda: operating_points(wltc, rate_hz=50.0), wltc.duration_s, 50.0
+        ),
+        "air path, WLTC 1800 s, 500 Hz internal": (
+            lambda: simulate_airpath(points.time_s, fuel, speed, seed=0, rate_hz=10.0),
+            float(points.time_s[-1]), 500.0,
+        ),
+        "NOx sensor, 1800 s at 50 Hz": (
+            lambda: simulate_nox(points.time_s, speed, fuel, seed=0),
+            float(points.time_s[-1]), 50.0,
+        ),
+        "SI torque, 30 s, 10 kHz internal": (
+            lambda: simulate_si_torque(seed=0), 30.0, 10_000.0
+        ),
+    }  # fmt: skip
+    out = {}
+    for name, (run, seconds, rate) in cases.items():
+        run()
+        best = min(_timed(run) for _ in range(3))
+        out[name] = {"simulated_s": seconds, "internal_rate_hz": rate, "wall_s": best}
+    return out
+
+
+def _timed(run: Callable[[], object]) -> float:
+    t0 = time.perf_counter()
+    run()
+    return time.perf_counter() - t0
+
+
 def run_benchmarks(*, quick: bool = False) -> dict[str, Any]:
     sizes = [2, 4, 8, 12, 16] if quick else list(range(2, 22))
     rows = sweep(sizes, quick)
@@ -253,6 +295,7 @@ def run_benchmarks(*, quick: bool = False) -> dict[str, Any]:
         "nox_12x18": nox_table(quick),
         "filterpy": filterpy_comparison(16, 60 if quick else 300),
         "sskf_product_vs_exact_gain": sskf_gain_gap(),
+        "simulators": simulators(),
     }
 
 
@@ -296,4 +339,7 @@ def format_report(report: dict[str, Any]) -> str:
         f"SSKF product gain vs exact 2-D Riccati gain (r = {gap['r']:g}): max |ΔK| "
         f"{gap['max_abs_gain_difference']:.3f} at η = {gap['at_eta']}"
     )
+    lines += ["", "Ground-truth simulators (wall time, compiled)"]
+    for name, sim in report["simulators"].items():
+        lines.append(f"  {name:<48} {sim['wall_s']:>7.3f} s")
     return "\n".join(lines)
