@@ -30,6 +30,8 @@ class ScenarioData:
     ``map_output`` the measured channel the table explains (``None`` when the map is only
     seen through a model, as a MAF error). ``map_points`` are the true operating points
     ``(n, d)`` the map is scored along; by default the ``map_inputs`` channels.
+    ``scored_series`` maps an estimator output name (e.g. ``torque_nm``, ``w_c_kg_s``) to its
+    true series, one value per sample, which ``mapwise run`` scores the estimate against.
     """
 
     scenario: str
@@ -40,6 +42,7 @@ class ScenarioData:
     map_inputs: tuple[str, ...] = ()
     map_output: str | None = None
     map_points: np.ndarray | None = None
+    scored_series: dict[str, np.ndarray] = field(default_factory=dict)
 
     def scoring_points(self) -> np.ndarray:
         if self.true_map is None:
@@ -280,6 +283,7 @@ def _maf(name: str, cycle: str, kind: str, description: str, duration_s: float) 
             map_inputs=inputs,
             map_output=None,
             map_points=points_true,
+            scored_series={"w_c_kg_s": truth["w_c_kg_s"]},
         )
 
     suggested = ("lpv",) if kind == "2d" else ("ekf-map", "ekf-aug", "ekf-def")
@@ -315,7 +319,13 @@ def _torque(name: str, description: str, channels: tuple[tuple[str, str], ...]) 
 
         simulate = simulate_si_torque if name == "torque-si" else simulate_torque_rig
         signals, truth = simulate(seed=seed, duration_s=duration, rate_hz=rate_hz)
-        return ScenarioData(scenario=name, seed=seed, signals=signals, truth=truth.to_dict())
+        return ScenarioData(
+            scenario=name,
+            seed=seed,
+            signals=signals,
+            truth=truth.to_dict(),
+            scored_series={"torque_nm": truth.torque_nm},
+        )
 
     return Scenario(
         name=name,
