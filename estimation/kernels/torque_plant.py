@@ -83,6 +83,10 @@ C_F1 = 32  # sweep end frequency                       [Hz]
 C_T_SWEEP = 33  # sweep duration                            [s]
 N_RIG_COEF = 34
 
+Derivatives = tuple[float, ...]
+"""A plant model's return: ``(dp_m, dN, dcrank, dinteg, dx5, N_ref, τ_e, τ_mean, τ_i, τ_f,
+τ_l, ṁ_ai, ṁ_ao, ṁ_f)`` (14 floats)."""
+
 TWO_PI = 2.0 * math.pi
 RPM_TO_RAD_S = TWO_PI / 60.0
 
@@ -169,13 +173,11 @@ def si_model(
     coef: np.ndarray,
     ref_time_s: np.ndarray,
     ref_speed_rpm: np.ndarray,
-) -> tuple[
-    float, float, float, float, float, float, float, float, float, float, float, float, float
-]:
+) -> Derivatives:
     """Right-hand side and algebraic outputs of the SI plant at one instant.
 
     Returns ``(dp_m, dN, dcrank, dinteg, dalpha, N_ref, τ_e, τ_mean, τ_i, τ_f, τ_l, ṁ_ai,
-    ṁ_ao)``; ``ṁ_f`` is ``ṁ_ao/(λ L_th)``.
+    ṁ_ao, ṁ_f)`` with ``ṁ_f = ṁ_ao/(λ L_th)``, TQ (4).
     """
     n_ref = interp_pw(t, ref_time_s, ref_speed_rpm)
     err = n_ref - n_rpm
@@ -216,6 +218,7 @@ def si_model(
         tau_l,
         m_ai,
         m_ao,
+        m_f,
     )
 
 
@@ -251,96 +254,6 @@ def _write_row(
     row[OUT_THETA1] = -tau_f / n_rpm
     row[OUT_THETA2] = tau_i / m_ai
     row[OUT_FIRING_HZ] = n_rpm * n_cyl / 120.0
-
-
-@nb.njit(cache=True)
-def si_torque_kernel(
-    coef: np.ndarray,
-    ref_time_s: np.ndarray,
-    ref_speed_rpm: np.ndarray,
-    x0: np.ndarray,
-    dt_s: float,
-    decimation: int,
-    out: np.ndarray,
-) -> None:
-    """Integrate the SI plant with classical RK4 at step ``dt_s``; fill ``out[k]`` every
-    ``decimation`` steps (``out`` has ``n_out`` rows, time ``k·decimation·dt_s``).
-
-    ``x0 = [p_m (Pa), N (rpm), crank (rad), PI integral (deg), throttle α (deg)]``.
-    """
-    p = x0[0]
-    n = x0[1]
-    c = x0[2]
-    q = x0[3]
-    a = x0[4]
-    n_out = out.shape[0]
-    h = dt_s
-    cycle = 4.0 * math.pi
-    for k in range(n_out):
-        for j in range(decimation):
-            t = (k * decimation + j) * h
-            k1 = si_model(t, p, n, c, q, a, coef, ref_time_s, ref_speed_rpm)
-            if j == 0:
-                _write_row(
-                    out[k],
-                    n,
-                    k1[5],
-                    k1[6],
-                    k1[7],
-                    k1[8],
-                    k1[9],
-                    k1[10],
-                    k1[11],
-                    k1[12],
-                    k1[12] / (coef[C_LAMBDA] * coef[C_LTH]),
-                    p,
-                    a,
-                    coef[C_NCYL],
-                )
-                if k == n_out - 1:
-                    break
-            hh = 0.5 * h
-            k2 = si_model(
-                t + hh,
-                p + hh * k1[0],
-                n + hh * k1[1],
-                c + hh * k1[2],
-                q + hh * k1[3],
-                a + hh * k1[4],
-                coef,
-                ref_time_s,
-                ref_speed_rpm,
-            )
-            k3 = si_model(
-                t + hh,
-                p + hh * k2[0],
-                n + hh * k2[1],
-                c + hh * k2[2],
-                q + hh * k2[3],
-                a + hh * k2[4],
-                coef,
-                ref_time_s,
-                ref_speed_rpm,
-            )
-            k4 = si_model(
-                t + h,
-                p + h * k3[0],
-                n + h * k3[1],
-                c + h * k3[2],
-                q + h * k3[3],
-                a + h * k3[4],
-                coef,
-                ref_time_s,
-                ref_speed_rpm,
-            )
-            w = h / 6.0
-            p += w * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0])
-            n += w * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1])
-            c += w * (k1[2] + 2.0 * k2[2] + 2.0 * k3[2] + k4[2])
-            q += w * (k1[3] + 2.0 * k2[3] + 2.0 * k3[3] + k4[3])
-            a += w * (k1[4] + 2.0 * k2[4] + 2.0 * k3[4] + k4[4])
-            if c >= cycle:
-                c -= cycle  # one 720° cycle; keeps the phase exact over long runs
 
 
 @nb.njit(cache=True)
@@ -416,22 +329,7 @@ def rig_model(
     coef: np.ndarray,
     demand_time_s: np.ndarray,
     demand_nm: np.ndarray,
-) -> tuple[
-    float,
-    float,
-    float,
-    float,
-    float,
-    float,
-    float,
-    float,
-    float,
-    float,
-    float,
-    float,
-    float,
-    float,
-]:
+) -> Derivatives:
     """Right-hand side and outputs of the diesel rig at one instant.
 
     Returns ``(dp_m, dN, dcrank, dinteg, ddemand, N_ref, τ_e, τ_mean, τ_i, τ_f, τ_l, ṁ_ai,
@@ -480,30 +378,96 @@ def rig_boost_equilibrium_pa(n_rpm: float, demand_nm: float, coef: np.ndarray) -
     return p
 
 
+# --- both plants: one RK4 integrator -------------------------------------------------------
+PLANT_SI = 0  # si_model; x0 = [p_m (Pa), N (rpm), crank (rad), PI integral (deg), α (deg)]
+PLANT_RIG = 1  # rig_model; x0 = [p_m (Pa), N (rpm), crank (rad), dyno PI (N·m), demand (N·m)]
+
+
 @nb.njit(cache=True)
-def rig_torque_kernel(
+def plant_model(
+    plant: int,
+    t: float,
+    p_m: float,
+    n_rpm: float,
+    crank: float,
+    integ: float,
+    x5: float,
     coef: np.ndarray,
-    demand_time_s: np.ndarray,
-    demand_nm: np.ndarray,
+    table_x: np.ndarray,
+    table_y: np.ndarray,
+) -> Derivatives:
+    """:func:`si_model` (``PLANT_SI``) or :func:`rig_model` (``PLANT_RIG``): the 5 state
+    derivatives followed by ``(N_ref, τ_e, τ_mean, τ_i, τ_f, τ_l, ṁ_ai, ṁ_ao, ṁ_f)``.
+
+    A branch on an integer rather than the model passed as a function: numba cannot cache a
+    kernel that takes (or closes over) a compiled function as a value.
+    """
+    if plant == PLANT_RIG:
+        return rig_model(t, p_m, n_rpm, crank, integ, x5, coef, table_x, table_y)
+    return si_model(t, p_m, n_rpm, crank, integ, x5, coef, table_x, table_y)
+
+
+@nb.njit(cache=True)
+def _stage(
+    plant: int,
+    t: float,
+    p_m: float,
+    n_rpm: float,
+    crank: float,
+    integ: float,
+    x5: float,
+    h: float,
+    k: Derivatives,
+    coef: np.ndarray,
+    table_x: np.ndarray,
+    table_y: np.ndarray,
+) -> Derivatives:
+    """One RK4 stage: :func:`plant_model` at time ``t`` and state ``x + h·k[:5]``."""
+    return plant_model(
+        plant,
+        t,
+        p_m + h * k[0],
+        n_rpm + h * k[1],
+        crank + h * k[2],
+        integ + h * k[3],
+        x5 + h * k[4],
+        coef,
+        table_x,
+        table_y,
+    )
+
+
+@nb.njit(cache=True)
+def torque_rk4_kernel(
+    plant: int,
+    coef: np.ndarray,
+    table_x: np.ndarray,
+    table_y: np.ndarray,
     x0: np.ndarray,
     dt_s: float,
     decimation: int,
     out: np.ndarray,
 ) -> None:
-    """Integrate the diesel rig with RK4 at ``dt_s``; fill ``out[k]`` every ``decimation``
-    steps. ``x0 = [p_m (Pa), N (rpm), crank (rad), dyno PI integral (N·m), demand (N·m)]``."""
+    """Integrate ``plant`` (``PLANT_SI`` or ``PLANT_RIG``) with classical RK4 at step ``dt_s``;
+    fill ``out[k]`` every ``decimation`` steps (``out`` has ``n_out`` rows, time
+    ``k·decimation·dt_s``).
+
+    ``(table_x, table_y)`` is the SI speed reference (s, rpm) or the rig torque demand
+    (s, N·m); ``x0 = [p_m (Pa), N (rpm), crank (rad), PI integral, x5]`` with ``x5`` the
+    throttle α (deg, SI) or the filtered demand (N·m, rig), written to ``OUT_ACTUATOR``.
+    """
     p = x0[0]
     n = x0[1]
     c = x0[2]
     q = x0[3]
-    d = x0[4]
+    a = x0[4]
     n_out = out.shape[0]
     h = dt_s
     cycle = 4.0 * math.pi
     for k in range(n_out):
         for j in range(decimation):
             t = (k * decimation + j) * h
-            k1 = rig_model(t, p, n, c, q, d, coef, demand_time_s, demand_nm)
+            k1 = plant_model(plant, t, p, n, c, q, a, coef, table_x, table_y)
             if j == 0:
                 _write_row(
                     out[k],
@@ -518,50 +482,20 @@ def rig_torque_kernel(
                     k1[12],
                     k1[13],
                     p,
-                    d,
+                    a,
                     coef[C_NCYL],
                 )
                 if k == n_out - 1:
                     break
             hh = 0.5 * h
-            k2 = rig_model(
-                t + hh,
-                p + hh * k1[0],
-                n + hh * k1[1],
-                c + hh * k1[2],
-                q + hh * k1[3],
-                d + hh * k1[4],
-                coef,
-                demand_time_s,
-                demand_nm,
-            )
-            k3 = rig_model(
-                t + hh,
-                p + hh * k2[0],
-                n + hh * k2[1],
-                c + hh * k2[2],
-                q + hh * k2[3],
-                d + hh * k2[4],
-                coef,
-                demand_time_s,
-                demand_nm,
-            )
-            k4 = rig_model(
-                t + h,
-                p + h * k3[0],
-                n + h * k3[1],
-                c + h * k3[2],
-                q + h * k3[3],
-                d + h * k3[4],
-                coef,
-                demand_time_s,
-                demand_nm,
-            )
+            k2 = _stage(plant, t + hh, p, n, c, q, a, hh, k1, coef, table_x, table_y)
+            k3 = _stage(plant, t + hh, p, n, c, q, a, hh, k2, coef, table_x, table_y)
+            k4 = _stage(plant, t + h, p, n, c, q, a, h, k3, coef, table_x, table_y)
             w = h / 6.0
             p += w * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0])
             n += w * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1])
             c += w * (k1[2] + 2.0 * k2[2] + 2.0 * k3[2] + k4[2])
             q += w * (k1[3] + 2.0 * k2[3] + 2.0 * k3[3] + k4[3])
-            d += w * (k1[4] + 2.0 * k2[4] + 2.0 * k3[4] + k4[4])
+            a += w * (k1[4] + 2.0 * k2[4] + 2.0 * k3[4] + k4[4])
             if c >= cycle:
-                c -= cycle
+                c -= cycle  # one 720° cycle; keeps the phase exact over long runs

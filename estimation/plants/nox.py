@@ -42,10 +42,10 @@ import math
 from dataclasses import asdict, dataclass
 from typing import Any
 
-import numba as nb
 import numpy as np
 
 from estimation.errors import ConfigError, SignalError
+from estimation.kernels.sensor import sensor_kernel
 from estimation.signals import Signals, delay_samples
 from estimation.table import Axis, Table
 
@@ -207,21 +207,6 @@ def drifted_map(base_map: Table, age_h: float, params: NoxParams = DEFAULT_NOX_P
     return base_map.with_values(gain * base_map.values + params.drift_offset_ppm_per_h * age_h)
 
 
-@nb.njit(cache=True)
-def _sensor_kernel(x: np.ndarray, delay: int, a: float, y_init: float, out: np.ndarray) -> None:
-    """``out[k] = a·out[k−1] + (1−a)·x[k−delay]`` with ``out[−1] = y_init``, ``x[j<0] = x[0]``.
-
-    SKF (25). ``x``, ``out`` : (n,) float64 [ppm]; no validation, no allocation.
-    """
-    y = y_init
-    b = 1.0 - a
-    for k in range(x.shape[0]):
-        j = k - delay
-        xd = x[j] if j >= 0 else x[0]
-        y = a * y + b * xd
-        out[k] = y
-
-
 @dataclass(frozen=True, slots=True)
 class NoxTruth:
     """What :func:`simulate_nox` knows and the estimator must find (arrays are read-only).
@@ -348,7 +333,7 @@ def simulate_nox(
     tau = delay_samples(params.delay_s, ts)
     y_init = float(x[0]) if params.sensor_initial_ppm is None else float(params.sensor_initial_ppm)
     y_m = np.empty_like(x)
-    _sensor_kernel(x, tau, float(params.lag), y_init, y_m)
+    sensor_kernel(x, tau, float(params.lag), y_init, y_m)
 
     rng = np.random.default_rng(seed)
     noise = params.noise_std_ppm * rng.standard_normal(x.size)

@@ -90,8 +90,26 @@ VARIANCE_20_STD: float = math.sqrt(20.0)
 """σ of TQ §VI's ``N(0, 20)`` read as variance 20 (see module docstring)."""
 
 
+class _EngineParams:
+    """What both parameter sets derive from their fields (a slot-less mixin)."""
+
+    __slots__ = ()
+    inertia_kg_m2: float
+
+    @property
+    def J_nm_s_per_rpm(self) -> float:
+        """Scaled inertia of TQ (8) with N in rpm: ``J = inertia·2π/60`` [N·m·s/rpm]."""
+        return self.inertia_kg_m2 * kp.RPM_TO_RAD_S
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able parameters (tuples become lists) plus the derived scaled inertia."""
+        d = {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+        d["J_nm_s_per_rpm"] = self.J_nm_s_per_rpm
+        return d
+
+
 @dataclass(frozen=True, slots=True)
-class SiEngineParams:
+class SiEngineParams(_EngineParams):
     """SI engine, dyno and scenario of TQ §VI. Source per field: "TQ" = given in the paper,
     otherwise a plausible value for a ~2 L naturally aspirated port-injected SI engine (TQ
     §II models this engine; its §VI GT-Power model is a 2.0 L turbo DI SI whose data TQ does
@@ -143,17 +161,9 @@ class SiEngineParams:
     load_noise_std_nm: float = VARIANCE_20_STD  # TQ §VI w2 = N(0, 20), read as variance
     air_noise_std_kg_s: float = 0.0  # TQ adds no noise to ṁ_ai
 
-    @property
-    def J_nm_s_per_rpm(self) -> float:
-        """Scaled inertia of TQ (8) with N in rpm: ``J = inertia·2π/60`` [N·m·s/rpm]."""
-        return self.inertia_kg_m2 * kp.RPM_TO_RAD_S
-
-    def to_dict(self) -> dict[str, Any]:
-        return _params_dict(self)
-
 
 @dataclass(frozen=True, slots=True)
-class DieselRigParams:
+class DieselRigParams(_EngineParams):
     """Diesel engine on a transient dyno, TQ §VII / Table V (turbocharged 2.0 L, 4 cylinders,
     320 N·m at 1800–2000 rpm). Values not in TQ are plausible for such an engine."""
 
@@ -197,14 +207,6 @@ class DieselRigParams:
     speed_noise_std_rpm: float = VARIANCE_20_STD
     load_noise_std_nm: float = VARIANCE_20_STD
     air_noise_std_kg_s: float = 0.0
-
-    @property
-    def J_nm_s_per_rpm(self) -> float:
-        """Scaled inertia of TQ (8) with N in rpm: ``J = inertia·2π/60`` [N·m·s/rpm]."""
-        return self.inertia_kg_m2 * kp.RPM_TO_RAD_S
-
-    def to_dict(self) -> dict[str, Any]:
-        return _params_dict(self)
 
 
 @dataclass(frozen=True, slots=True)
@@ -299,9 +301,7 @@ def simulate_si_torque(
     alpha0 = _si_throttle_for_load(p, coef, n0)
     p_m0 = kp.si_manifold_equilibrium_pa(n0, alpha0, coef)
     x0 = np.array([p_m0, n0, 0.0, alpha0, alpha0])
-    out = np.empty((n_out, kp.N_OUT))
-    kp.si_torque_kernel(coef, ref_time_s, ref_speed_rpm, x0, dt, decimation, out)
-    _require_finite_out(out)
+    out = _integrate(kp.PLANT_SI, coef, ref_time_s, ref_speed_rpm, x0, dt, decimation, n_out)
     extra = {
         THROTTLE_CHANNEL: (out[:, kp.OUT_ACTUATOR], "deg"),
         MANIFOLD_CHANNEL: (out[:, kp.OUT_MANIFOLD_PA], "Pa"),
@@ -365,9 +365,7 @@ def simulate_torque_rig(
     m_f0 = kp.rig_fuel(n0, d0, p_m0, coef)
     tau_e0 = kp.indicated_torque_mean(n0, m_f0, coef) - kp.friction_torque(n0, coef)
     x0 = np.array([p_m0, n0, 0.0, tau_e0, d0])
-    out = np.empty((n_out, kp.N_OUT))
-    kp.rig_torque_kernel(coef, times, torques, x0, dt, decimation, out)
-    _require_finite_out(out)
+    out = _integrate(kp.PLANT_RIG, coef, times, torques, x0, dt, decimation, n_out)
     extra = {
         MANIFOLD_CHANNEL: (out[:, kp.OUT_MANIFOLD_PA], "Pa"),
         SPEED_REF_CHANNEL: (out[:, kp.OUT_SPEED_REF_RPM], "rpm"),
@@ -436,13 +434,6 @@ _TRUTH_COLUMNS: dict[str, int] = {
     "theta2": kp.OUT_THETA2,
     "firing_frequency_hz": kp.OUT_FIRING_HZ,
 }
-
-
-def _params_dict(p: SiEngineParams | DieselRigParams) -> dict[str, Any]:
-    """JSON-able parameters (tuples become lists) plus the derived scaled inertia."""
-    d = {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(p).items()}
-    d["J_nm_s_per_rpm"] = p.J_nm_s_per_rpm
-    return d
 
 
 def _common_coefficients(
@@ -552,6 +543,23 @@ def _si_throttle_for_load(p: SiEngineParams, coef: np.ndarray, n_rpm: float) -> 
         else:
             hi = mid
     return 0.5 * (lo + hi)
+
+
+def _integrate(
+    plant: int,
+    coef: np.ndarray,
+    table_x: np.ndarray,
+    table_y: np.ndarray,
+    x0: np.ndarray,
+    dt: float,
+    decimation: int,
+    n_out: int,
+) -> np.ndarray:
+    """Run :func:`~estimation.kernels.torque_plant.torque_rk4_kernel`; ``(n_out, N_OUT)``."""
+    out = np.empty((n_out, kp.N_OUT))
+    kp.torque_rk4_kernel(plant, coef, table_x, table_y, x0, dt, decimation, out)
+    _require_finite_out(out)
+    return out
 
 
 def _require_finite_out(out: np.ndarray) -> None:
