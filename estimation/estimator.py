@@ -113,8 +113,9 @@ def describe_validation_error(exc: ValidationError) -> str:
 def registry() -> dict[str, EstimatorSpec]:
     """Every built-in estimator by name."""
     from estimation.filters.estimator import FILTER_SPECS
+    from estimation.torque import TORQUE_SPECS
 
-    return {spec.name: spec for spec in FILTER_SPECS}
+    return {spec.name: spec for spec in (*FILTER_SPECS, *TORQUE_SPECS)}
 
 
 def get_spec(name: str) -> EstimatorSpec:

@@ -19,6 +19,7 @@ from estimation.signals import Signals
 from estimation.table import Table
 
 TABLE_FILTERS = ("kf", "skf", "sskf", "rls", "nlms")
+TORQUE_ESTIMATORS = ("uio", "smo", "dirty", "adaptive-const", "adaptive-tv")
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -327,15 +328,26 @@ def _torque(name: str, description: str, channels: tuple[tuple[str, str], ...]) 
             scored_series={"torque_nm": truth.torque_nm},
         )
 
+    def configs(estimator: str) -> dict[str, Any]:
+        from estimation.plants.torque import DieselRigParams, SiEngineParams
+
+        if estimator not in TORQUE_ESTIMATORS:
+            return {}
+        params = SiEngineParams() if name == "torque-si" else DieselRigParams()
+        config: dict[str, Any] = {"J_nm_s_per_rpm": params.J_nm_s_per_rpm}
+        if estimator == "smo":
+            config["lambda1"] = 150.0 if name == "torque-si" else 350.0  # TQ §VI, §VII
+        return config
+
     return Scenario(
         name=name,
         description=description,
         rate_hz=rate_hz,
         duration_s=30.0,
         channels=channels,
-        suggested=("uio", "smo", "dirty", "adaptive-const", "adaptive-tv"),
+        suggested=TORQUE_ESTIMATORS,
         builder=build,
-        configs=lambda estimator: {},
+        configs=configs,
     )
 
 
