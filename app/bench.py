@@ -275,6 +275,21 @@ def simulators() -> dict[str, dict[str, float]]:
     return out
 
 
+def estimators_on_scenarios(quick: bool) -> dict[str, dict[str, float]]:
+    """End-to-end samples/s (``fit`` over the whole record) of the non-table estimators on
+    their scenarios."""
+    from estimation.scenarios import TORQUE_ESTIMATORS, get_scenario
+
+    data = get_scenario("torque-si").build(seed=0, duration_s=10.0 if quick else None)
+    out = {}
+    for name in TORQUE_ESTIMATORS:
+        config = get_scenario("torque-si").default_config(name)
+        estimator = get_spec(name).build(config)
+        rate = _best_rate(lambda e=estimator: e.fit(data.signals), len(data.signals))
+        out[f"{name} on torque-si"] = {"samples_per_s": rate}
+    return out
+
+
 def _timed(run: Callable[[], object]) -> float:
     t0 = time.perf_counter()
     run()
@@ -296,6 +311,7 @@ def run_benchmarks(*, quick: bool = False) -> dict[str, Any]:
         "filterpy": filterpy_comparison(16, 60 if quick else 300),
         "sskf_product_vs_exact_gain": sskf_gain_gap(),
         "simulators": simulators(),
+        "estimators": estimators_on_scenarios(quick),
     }
 
 
@@ -339,6 +355,9 @@ def format_report(report: dict[str, Any]) -> str:
         f"SSKF product gain vs exact 2-D Riccati gain (r = {gap['r']:g}): max |ΔK| "
         f"{gap['max_abs_gain_difference']:.3f} at η = {gap['at_eta']}"
     )
+    lines += ["", "Estimators on scenarios (end to end, samples/s)"]
+    for name, rate in report["estimators"].items():
+        lines.append(f"  {name:<48} {rate['samples_per_s']:>10.3g}")
     lines += ["", "Ground-truth simulators (wall time, compiled)"]
     for name, sim in report["simulators"].items():
         lines.append(f"  {name:<48} {sim['wall_s']:>7.3f} s")
