@@ -64,7 +64,7 @@ class Scenario:
     channels: tuple[tuple[str, str], ...]
     suggested: tuple[str, ...]
     builder: Callable[[int, float | None], ScenarioData] = field(repr=False)
-    configs: Callable[[str], dict[str, Any]] = field(repr=False)
+    configs: Callable[[str], dict[str, Any] | None] = field(repr=False)
 
     def build(self, *, seed: int = 0, duration_s: float | None = None) -> ScenarioData:
         if duration_s is not None and not 0 < duration_s <= self.duration_s:
@@ -77,7 +77,7 @@ class Scenario:
     def default_config(self, estimator: str) -> dict[str, Any]:
         """The starting config of ``estimator`` on this scenario (papers' settings)."""
         config = self.configs(estimator)
-        if not config:
+        if config is None:
             raise ConfigError(
                 f"estimator {estimator!r} does not apply to scenario {self.name!r}; "
                 f"suggested: {', '.join(self.suggested)}"
@@ -105,11 +105,11 @@ def table_filter_config(
     sigma_v: float,
     p0: float,
     sensor: dict[str, float] | None = None,
-) -> dict[str, Any]:
+) -> dict[str, Any] | None:
     """A config for one of the five table filters on ``table``'s grid (only the keys that
-    filter understands)."""
+    filter understands); ``None`` for any other estimator."""
     if estimator not in TABLE_FILTERS:
-        return {}
+        return None
     config: dict[str, Any] = {
         "axes": [a.to_dict() for a in table.axes],
         "output": output,
@@ -151,7 +151,7 @@ def _skf_sim(number: int) -> Scenario:
             map_output="y",
         )
 
-    def configs(estimator: str) -> dict[str, Any]:
+    def configs(estimator: str) -> dict[str, Any] | None:
         # SKF §5: θ0 = 0, P0 = 0, σv² = σw² = 1.
         return table_filter_config(
             estimator, skf_sim_table(), "y", sigma_w=1.0, sigma_v=1.0, p0=0.0
@@ -205,7 +205,7 @@ def _nox(name: str, cycle: str, description: str, duration_s: float) -> Scenario
             map_output="nox_ppm",
         )
 
-    def configs(estimator: str) -> dict[str, Any]:
+    def configs(estimator: str) -> dict[str, Any] | None:
         from estimation.plants.nox import nox_base_map
 
         # SKF (34): σv = 25, σw = 15, σf = 50 ppm, a = 0.96, τ = 0.75 s at 50 Hz; T_NOx,0 = 0.
@@ -305,7 +305,7 @@ def _maf(name: str, cycle: str, kind: str, description: str, duration_s: float) 
         ),
         suggested=suggested,
         builder=build,
-        configs=lambda estimator: {},
+        configs=lambda estimator: {} if estimator in suggested else None,
     )
 
 
@@ -328,11 +328,11 @@ def _torque(name: str, description: str, channels: tuple[tuple[str, str], ...]) 
             scored_series={"torque_nm": truth.torque_nm},
         )
 
-    def configs(estimator: str) -> dict[str, Any]:
+    def configs(estimator: str) -> dict[str, Any] | None:
         from estimation.plants.torque import DieselRigParams, SiEngineParams
 
         if estimator not in TORQUE_ESTIMATORS:
-            return {}
+            return None
         params = SiEngineParams() if name == "torque-si" else DieselRigParams()
         config: dict[str, Any] = {"J_nm_s_per_rpm": params.J_nm_s_per_rpm}
         if estimator == "smo":
