@@ -280,13 +280,15 @@ def estimators_on_scenarios(quick: bool) -> dict[str, dict[str, float]]:
     their scenarios."""
     from estimation.scenarios import TORQUE_ESTIMATORS, get_scenario
 
-    data = get_scenario("torque-si").build(seed=0, duration_s=10.0 if quick else None)
     out = {}
-    for name in TORQUE_ESTIMATORS:
-        config = get_scenario("torque-si").default_config(name)
-        estimator = get_spec(name).build(config)
-        rate = _best_rate(lambda e=estimator: e.fit(data.signals), len(data.signals))
-        out[f"{name} on torque-si"] = {"samples_per_s": rate}
+    for scenario in ("torque-si", "torque-rig"):
+        data = get_scenario(scenario).build(seed=0, duration_s=10.0 if quick else None)
+        for name in TORQUE_ESTIMATORS:
+            config = get_scenario(scenario).default_config(name)
+            estimator = get_spec(name).build(config)
+            signals = data.signals
+            rate = _best_rate(lambda e=estimator, s=signals: e.fit(s), len(signals))
+            out[f"{name} on {scenario}"] = {"samples_per_s": rate}
     return out
 
 

@@ -1,30 +1,38 @@
-"""Read drive logs from CSV into :class:`estimation.Signals`.
+"""Read drive logs from CSV into :class:`estimation.Signals` — the one CSV reader of mapwise.
 
 Accepted layout: one header row (delimiter sniffed among ``, ; tab``); units either in the
 header as ``name [unit]`` or in an optional second row whose non-empty cells are all
-non-numeric; lines starting with ``#`` are comments. Only the requested columns must be
-numeric; every problem is reported with its file line and column name.
+non-numeric; lines starting with ``#`` are comments. With ``;`` or tab as delimiter a decimal
+comma (``1,5``) is recognised. Every problem is reported with its file line and column name.
+
+``mapwise adapt`` reads only the columns it needs (:func:`read_csv` with ``columns``); the
+upload path (:mod:`app.io.ingest`) calls :func:`parse_csv` with ``strict=True`` so that
+every column must be numeric.
 """
 
 from __future__ import annotations
 
 import csv
-import math
 import re
-from collections.abc import Sequence
+from collections import Counter
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from app.io.errors import InputError
 from estimation import Signals
 from estimation.errors import SignalError
 
 TIME_COLUMNS = ("time", "time_s", "t", "timestamp")
+DELIMITERS = ",;\t"
 _HEADER_UNIT = re.compile(r"^\s*(?P<name>.+?)\s*\[(?P<unit>[^\]]*)\]\s*$")
+_DECIMAL_COMMA = re.compile(r"^\s*[+-]?\d+,\d+([eE][+-]?\d+)?\s*$")
+_DECIMAL_POINT = re.compile(r"\d\.\d")
 
 
-class LogFormatError(SignalError):
+class LogFormatError(InputError, SignalError):
     """The file is not a usable log; the message names the line and column."""
 
 
@@ -34,6 +42,8 @@ class CsvLog:
 
     signals: Signals
     time_column: str | None
+    delimiter: str = ","
+    decimal: str = "."
 
 
 def read_csv(
@@ -51,75 +61,161 @@ def read_csv(
     try:
         text = path.read_text(encoding="utf-8-sig")
     except FileNotFoundError:
-        raise LogFormatError(f"{path}: no such file") from None
+        raise LogFormatError(f"{path}: no such file", field="file") from None
     except UnicodeDecodeError as exc:
-        raise LogFormatError(f"{path}: not a UTF-8 text file ({exc.reason})") from None
-    rows = _rows(text)
-    if not rows:
-        raise LogFormatError(f"{path}: empty file, expected a header row")
-    header_line, header = rows[0]
-    names, units = _split_header(header, header_line)
-    body = rows[1:]
-    if body and _is_units_row(body[0][1]):
-        line, cells = body[0]
-        if len(cells) != len(names):
+        raise LogFormatError(
+            f"{path}: not a UTF-8 text file ({exc.reason})", field="file"
+        ) from None
+    try:
+        return parse_csv(text, columns=columns, time_column=time_column)
+    except LogFormatError as exc:
+        if exc.field == "file" and exc.line is None:
+            raise LogFormatError(f"{path}: {exc}", field="file") from None
+        raise
+
+
+def parse_csv(
+    text: str,
+    *,
+    columns: Sequence[str] | None = None,
+    time_column: str | None = None,
+    strict: bool = False,
+    units: Mapping[str, str] | None = None,
+    decimal: str | None = None,
+    max_header_chars: int | None = None,
+    max_columns: int | None = None,
+) -> CsvLog:
+    """Parse CSV ``text`` into a log.
+
+    ``columns``: the channels wanted (each must be numeric); ``None`` keeps every numeric
+    column, or — with ``strict`` — requires every column to be numeric. ``units`` overrides
+    units by column name (an unknown name is an error, field ``units.<name>``). ``decimal``
+    is ``"."``, ``","`` or ``None`` (detected). Raises :class:`LogFormatError`.
+    """
+    lines = _content_lines(text)
+    if not lines:
+        raise LogFormatError("empty file, expected a header row", field="file")
+    header_line, header_text = lines[0]
+    if max_header_chars is not None and len(header_text) > max_header_chars:
+        raise LogFormatError(
+            f"line {header_line}: header is {len(header_text)} characters long, "
+            f"the limit is {max_header_chars}",
+            field="header",
+            line=header_line,
+        )
+    delimiter = sniff_delimiter([ln for _, ln in lines[:20]])
+    rows = list(csv.reader([ln for _, ln in lines[:2]], delimiter=delimiter))
+    numbers = [n for n, _ in lines]
+    names, header_units = _split_header(rows[0], header_line)
+    if max_columns is not None and len(names) > max_columns:
+        raise LogFormatError(
+            f"line {header_line}: {len(names)} columns, the limit is {max_columns}",
+            field="header",
+            line=header_line,
+        )
+    start = 1
+    if len(rows) > 1 and _is_units_row(rows[1]):
+        if len(rows[1]) != len(names):
             raise LogFormatError(
-                f"line {line}: units row has {len(cells)} fields, header has {len(names)}"
+                f"line {numbers[1]}: units row has {len(rows[1])} fields, header has {len(names)}",
+                field="header",
+                line=numbers[1],
             )
-        units = [u.strip() or h for u, h in zip(cells, units, strict=True)]
-        body = body[1:]
-    for line, cells in body:
-        if len(cells) != len(names):
-            raise LogFormatError(f"line {line}: {len(cells)} fields, header has {len(names)}")
+        header_units = [u.strip() or h for u, h in zip(rows[1], header_units, strict=True)]
+        start = 2
+    lines_of_body = numbers[start:]
+    cells_by_column = _columns(
+        [ln for _, ln in lines[start:]], lines_of_body, delimiter, len(names)
+    )
+    unit_of = dict(zip(names, header_units, strict=True))
+    for name, unit in (units or {}).items():
+        if name not in unit_of:
+            raise LogFormatError(
+                f"units given for unknown column {name!r}; the file has {names}",
+                field=f"units.{name}",
+            )
+        unit_of[name] = str(unit)
+    if decimal is None:
+        sample = [list(col[:20]) for col in cells_by_column]
+        decimal = sniff_decimal([list(r) for r in zip(*sample, strict=True)], delimiter)
     if time_column is None:
         time_column = next((c for c in TIME_COLUMNS if c in names), None)
     elif time_column not in names:
-        raise LogFormatError(f"time column {time_column!r} not in the file; columns: {names}")
+        raise LogFormatError(
+            f"time column {time_column!r} not in the file; columns: {names}", field=time_column
+        )
     wanted = list(columns) if columns is not None else None
     if wanted is not None:
         missing = [c for c in wanted if c not in names]
         if missing:
             raise LogFormatError(
                 f"missing column{'s' if len(missing) > 1 else ''} "
-                f"{', '.join(repr(c) for c in missing)}; the file has {names}"
+                f"{', '.join(repr(c) for c in missing)}; the file has {names}",
+                field=missing[0],
             )
-    lines = [line for line, _ in body]
     parsed: dict[str, np.ndarray] = {}
     for j, name in enumerate(names):
         if name == time_column or (wanted is not None and name not in wanted):
             continue
-        column = [cells[j] for _, cells in body]
-        values = _parse_column(column, lines, name, strict=wanted is not None)
+        must = strict or wanted is not None
+        values = _parse_column(
+            cells_by_column[j], lines_of_body, name, strict=must, decimal=decimal
+        )
         if values is not None:
             parsed[name] = values
     if time_column is not None:
         j = names.index(time_column)
-        time = _parse_column([c[j] for _, c in body], lines, time_column, strict=True)
+        time = _parse_column(
+            cells_by_column[j], lines_of_body, time_column, strict=True, decimal=decimal
+        )
         assert time is not None
     else:
-        time = np.arange(len(body), dtype=np.float64)
+        time = np.arange(len(lines_of_body), dtype=np.float64)
     try:
-        signals = Signals(time, parsed, dict(zip(names, units, strict=True)))
+        signals = Signals(time, parsed, unit_of)
     except SignalError as exc:
-        raise LogFormatError(_with_line(str(exc), lines)) from None
-    return CsvLog(signals, time_column)
+        message, line = _with_line(str(exc), lines_of_body)
+        raise LogFormatError(message, field=time_column or "time", line=line) from None
+    return CsvLog(signals, time_column, delimiter, decimal)
 
 
-def _rows(text: str) -> list[tuple[int, list[str]]]:
-    lines = [(n, ln) for n, ln in enumerate(text.splitlines(), start=1)]
-    content = [(n, ln) for n, ln in lines if ln.strip() and not ln.lstrip().startswith("#")]
-    if not content:
-        return []
-    sample = "\n".join(ln for _, ln in content[:20])
+def _content_lines(text: str) -> list[tuple[int, str]]:
+    """Non-blank, non-comment lines with their 1-based line numbers."""
+    return [
+        (n, ln)
+        for n, ln in enumerate(text.splitlines(), start=1)
+        if ln.strip() and not ln.lstrip().startswith("#")
+    ]
+
+
+def sniff_delimiter(sample_lines: list[str]) -> str:
+    """The column delimiter among tab, ``;`` and ``,``.
+
+    First choice: a delimiter that occurs equally often (and at least once) on every sample
+    line, preferring tab, then ``;`` (whose files often use a decimal comma, so ``,`` may be
+    just as regular), then ``,``; else :class:`csv.Sniffer` (quoted fields); else the one
+    most frequent in the header.
+    """
+    for d in ("\t", ";", ","):
+        counts = {line.count(d) for line in sample_lines}
+        if len(counts) == 1 and 0 not in counts:
+            return d
     try:
-        dialect: type[csv.Dialect] | csv.Dialect = csv.Sniffer().sniff(sample, delimiters=",;\t")
+        return csv.Sniffer().sniff("\n".join(sample_lines), delimiters=DELIMITERS).delimiter
     except csv.Error:
-        dialect = csv.excel
-    out = []
-    for n, ln in content:
-        cells = next(csv.reader([ln], dialect))
-        out.append((n, cells))
-    return out
+        header = sample_lines[0]
+        counts = {d: header.count(d) for d in DELIMITERS}
+        best = max(counts, key=lambda d: counts[d])
+        return best if counts[best] else ","
+
+
+def sniff_decimal(rows: list[list[str]], delimiter: str) -> str:
+    if delimiter == ",":
+        return "."
+    cells = [c for row in rows for c in row]
+    comma = any(_DECIMAL_COMMA.match(c) for c in cells)
+    point = any(_DECIMAL_POINT.search(c) for c in cells)
+    return "," if comma and not point else "."
 
 
 def _split_header(header: list[str], line: int) -> tuple[list[str], list[str]]:
@@ -128,13 +224,45 @@ def _split_header(header: list[str], line: int) -> tuple[list[str], list[str]]:
         match = _HEADER_UNIT.match(cell)
         name, unit = (match["name"], match["unit"].strip()) if match else (cell.strip(), "")
         if not name:
-            raise LogFormatError(f"line {line}: empty column name in the header")
+            raise LogFormatError(
+                f"line {line}: empty column name in the header", field="header", line=line
+            )
         names.append(name)
         units.append(unit)
-    dupes = sorted({n for n in names if names.count(n) > 1})
+    dupes = sorted(n for n, count in Counter(names).items() if count > 1)
     if dupes:
-        raise LogFormatError(f"line {line}: duplicate column names {dupes}")
+        raise LogFormatError(
+            f"line {line}: duplicate column names {dupes}", field="header", line=line
+        )
     return names, units
+
+
+def _columns(body: list[str], lines: list[int], delimiter: str, width: int) -> list[Sequence[str]]:
+    """The body's cells column by column, every row checked to have ``width`` fields.
+
+    Without quote characters the whole body is split at once (fast for long logs);
+    otherwise each line goes through :mod:`csv`.
+    """
+    if not body:
+        return [[] for _ in range(width)]
+    joined = "\n".join(body)
+    if '"' in joined:
+        rows = list(csv.reader(body, delimiter=delimiter))
+        counts = [len(row) for row in rows]
+    else:
+        rows = None
+        counts = [ln.count(delimiter) + 1 for ln in body]
+    for k, count in enumerate(counts):
+        if count != width:
+            raise LogFormatError(
+                f"line {lines[k]}: {count} fields, header has {width}",
+                field="file",
+                line=lines[k],
+            )
+    if rows is not None:
+        return [list(col) for col in zip(*rows, strict=True)]
+    cells = joined.replace("\n", delimiter).split(delimiter)
+    return [cells[j::width] for j in range(width)]
 
 
 def _is_units_row(cells: list[str]) -> bool:
@@ -146,38 +274,55 @@ def _is_number(text: str) -> bool:
     try:
         float(text)
     except ValueError:
-        return False
+        return _DECIMAL_COMMA.match(text) is not None
     return True
 
 
 def _parse_column(
-    cells: list[str], lines: list[int], name: str, *, strict: bool
+    cells: Sequence[str], lines: list[int], name: str, *, strict: bool, decimal: str = "."
 ) -> np.ndarray | None:
-    """Floats of one column; ``None`` for a non-numeric column when not ``strict``."""
-    out = np.empty(len(cells))
-    for k, cell in enumerate(cells):
-        text = cell.strip()
-        try:
-            value = float(text)
-        except ValueError:
-            if not strict:
-                return None
-            what = "empty value" if not text else f"non-numeric value {text!r}"
-            raise LogFormatError(f"line {lines[k]}, column {name!r}: {what}") from None
-        if not math.isfinite(value):
-            raise LogFormatError(
-                f"line {lines[k]}, column {name!r}: {text} is not allowed (values must be finite)"
-            )
-        out[k] = value
+    """Floats of one column; ``None`` for a non-numeric column when not ``strict``.
+
+    The whole column is converted at once; only when that fails is it walked cell by cell
+    to name the first bad line.
+    """
+    texts = [c.replace(",", ".") for c in cells] if decimal == "," else list(cells)
+    try:
+        out = np.array(texts, dtype=np.float64) if texts else np.empty(0)
+    except ValueError:
+        out = None
+    if out is None:
+        if not strict:
+            return None
+        for k, text in enumerate(texts):
+            try:
+                float(text)
+            except ValueError:
+                shown = cells[k].strip()
+                what = "empty value" if not shown else f"non-numeric value {shown!r}"
+                raise LogFormatError(
+                    f"line {lines[k]}, column {name!r}: {what}", field=name, line=lines[k]
+                ) from None
+        out = np.array([float(t) for t in texts])  # numpy and float() disagree: trust float()
+    bad = ~np.isfinite(out)
+    if np.any(bad):
+        k = int(np.argmax(bad))
+        raise LogFormatError(
+            f"line {lines[k]}, column {name!r}: {cells[k].strip()} is not allowed "
+            "(values must be finite)",
+            field=name,
+            line=lines[k],
+        )
     return out
 
 
-def _with_line(message: str, lines: list[int]) -> str:
+def _with_line(message: str, lines: list[int]) -> tuple[str, int | None]:
     """Rewrite ``at sample k`` in a Signals error as the file line."""
     match = re.search(r"at sample (\d+)", message)
     if match and int(match[1]) < len(lines):
-        return message.replace(match[0], f"at line {lines[int(match[1])]}")
-    return message
+        line = lines[int(match[1])]
+        return message.replace(match[0], f"at line {line}"), line
+    return message, None
 
 
 def write_csv(signals: Signals, path: str | Path, *, time_column: str = "time") -> None:
@@ -185,7 +330,7 @@ def write_csv(signals: Signals, path: str | Path, *, time_column: str = "time") 
     with 17 significant digits (they round-trip exactly)."""
     names = signals.names
     if time_column in names:
-        raise LogFormatError(f"a channel is already called {time_column!r}")
+        raise LogFormatError(f"a channel is already called {time_column!r}", field=time_column)
     header = [f"{time_column} [s]"] + [
         f"{n} [{signals.units[n]}]" if signals.units.get(n) else n for n in names
     ]

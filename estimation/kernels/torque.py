@@ -7,7 +7,8 @@ public API is :mod:`estimation.torque`; these kernels only integrate. Each takes
 arrays of one chunk, advances its state arrays in place and writes one value per sample into
 its ``out`` arrays; no validation, no allocation in the loop.
 
-Units: ``N`` rpm, torques N·m, ``ṁ_ai`` kg/s, time s, ``J`` N·m·s/rpm (N in rpm).
+Units: ``N`` rpm, torques N·m, ``ṁ_ai`` kg/s (scaled to the configured unit inside Φ), time
+s, ``J`` N·m·s/rpm (N in rpm).
 
 Time discretisation (sample period ``Ts``, sample ``i`` at ``t_i``)
 -------------------------------------------------------------------
@@ -19,17 +20,31 @@ Time discretisation (sample period ``Ts``, sample ``i`` at ``t_i``)
   their forcing: ``P_{i+1} = b·P_i + (1 − b)/ℓ·Φ_fᵀΦ_f`` with ``b = exp(−ℓ·Ts)``.
 * The Riccati equation ``K̇ = ℓK − KΦ_fᵀΦ_fK`` (TQ (52)) is solved through its inverse
   ``R = K⁻¹``, which obeys the linear ``Ṙ = −ℓR + Φ_fᵀΦ_f``, ``R(0) = K0`` (TQ (53)), and so
-  is advanced exactly like ``P``; ``K = R⁻¹`` at each sample.
+  is advanced exactly like ``P``. ``K`` itself is never formed (next item).
 * The sliding-mode observer (TQ (19)) is integrated by explicit Euler at the data rate.
 * The parameter laws (TQ (50), (54)) are integrated by implicit (backward) Euler with
-  ``P, Q, K, Φ_f`` held over the step: with the paper's ``Γ = diag(0.1, 100)`` the stiffest
+  ``P, Q, R, Φ_f`` held over the step: with the paper's ``Γ = diag(0.1, 100)`` the stiffest
   mode ``Γ₁·P₁₁ ≈ 5·10⁴ s⁻¹`` makes explicit Euler diverge at 1 kHz, backward Euler is
-  A-stable.
+  A-stable. The step is solved as ``(S + Ts·A)Θ̂⁺ = S·Θ̂ + Ts·c`` with ``S = G⁻¹`` (``Γ⁻¹``,
+  or ``RΓ⁻¹`` for ``G = ΓK``), the same equation as ``(I + Ts·G·A)Θ̂⁺ = Θ̂ + Ts·G·c`` times
+  ``S`` but without ``K = R⁻¹``, which grows as ``e^{ℓt}`` along any direction Φ_f leaves
+  unexcited (TQ (53) without the PE of TQ Lemma 8).
+* Without PE the exact law still moves Θ̂ only along ``K0⁻¹Φ_fᵀ`` (the ``e^{−ℓt}`` cancels
+  in ``KΦ_fᵀ``), but in floating point ``e^{−ℓt}K0`` sinks below the round-off of ``P`` after
+  ~3.5 s, and round-off then steers Θ̂ (θ̂ ~ 10²⁰ in 60 s of constant data at Γ = 100). The
+  kernel therefore uses ``R + R_FLOOR·diag(R)``, ``R_FLOOR = 10⁻⁹`` (10⁷ above round-off),
+  capping ``K`` at ``10⁹/diag(R)``. On the torque scenarios this moves ISE by < 0.2 %; on
+  constant data Θ̂ stays bounded and ΦΘ̂ on target. A step matrix that is singular or whose
+  entries have decayed towards underflow (no data at all for ~35 s) leaves Θ̂ unchanged.
 """
 
 import math
 
 import numba as nb
+
+R_FLOOR = 1e-9
+"""Relative floor on ``R = K⁻¹`` (TQ (53)): ``R + R_FLOOR·diag(R)`` keeps ``R`` positive definite
+against round-off when Φ_f excites only one direction (see :func:`adaptive_kernel`)."""
 
 
 @nb.njit(cache=True)
@@ -107,6 +122,7 @@ def adaptive_kernel(
     speed_rpm,
     load_nm,
     air_kg_s,
+    air_scale,
     J,
     k,
     ell,
@@ -129,12 +145,14 @@ def adaptive_kernel(
         A   = P + κ Φ_fᵀΦ_f,   c = Q + κ Φ_fᵀ y              W1 + κW2 = AΘ̂ − c, TQ (46)–(47)
         G   = Γ            (constant gain, TQ (50))
             = Γ K, K = R⁻¹ (time-varying gain, TQ (52)–(54))
-        Θ̂ ← (I + Ts·G·A)⁻¹ (Θ̂ + Ts·G·c)                       backward Euler of Θ̂' = −G(AΘ̂ − c)
+        S   = G⁻¹ = Γ⁻¹ or R̃Γ⁻¹,  R̃ = R + R_FLOOR·diag(R)
+        Θ̂ ← (S + Ts·A)⁻¹ (S·Θ̂ + Ts·c)                       backward Euler of Θ̂' = −G(AΘ̂ − c)
         P, Q, R, N_f, τ_lf, Φ_f ← exact ZOH steps (module docstring)
 
     State arrays, advanced in place: ``filt`` (4,) = ``[N_f rpm, τ_lf N·m, Φ_f1 rpm,
-    Φ_f2 kg/s]``; ``P`` (2, 2); ``Q`` (2,); ``R`` (2, 2) = ``K⁻¹`` (unused by the constant
-    gain); ``theta`` (2,) = ``Θ̂`` [N·m/rpm, N·m/(kg/s)]. Inputs and outputs (n,).
+    Φ_f2 air unit]``; ``P`` (2, 2); ``Q`` (2,); ``R`` (2, 2) = ``K⁻¹`` (unused by the constant
+    gain); ``theta`` (2,) = ``Θ̂`` [N·m/rpm, N·m/(air unit)]. ``ṁ_ai`` enters Φ as
+    ``air_scale·air_kg_s`` (1 for kg/s, 1000 for g/s, 3600 for kg/h). Inputs and outputs (n,).
     """
     a = math.exp(-Ts / k)
     ca = 1.0 - a
@@ -157,44 +175,44 @@ def adaptive_kernel(
     th2 = theta[1]
     for i in range(speed_rpm.size):
         n = speed_rpm[i]
-        m = air_kg_s[i]
+        m = air_scale * air_kg_s[i]
         y = g * (n - n_f) + t_lf
         out_torque[i] = n * th1 + m * th2
         out_theta1[i] = th1
         out_theta2[i] = th2
-        half_tr = 0.5 * (p11 + p22)
+        # λ_min = det/λ_max: no cancellation against λ_max ≈ P11 (N² ≫ ṁ_ai²)
         half_df = 0.5 * (p11 - p22)
-        out_lambda_min[i] = half_tr - math.sqrt(half_df * half_df + p12 * p12)
+        lam_max = 0.5 * (p11 + p22) + math.sqrt(half_df * half_df + p12 * p12)
+        out_lambda_min[i] = (p11 * p22 - p12 * p12) / lam_max if lam_max > 0.0 else 0.0
         # W1 + κW2 = AΘ̂ − c
         a11 = p11 + kappa * f1 * f1
         a12 = p12 + kappa * f1 * f2
         a22 = p22 + kappa * f2 * f2
         c1 = q1 + kappa * f1 * y
         c2 = q2 + kappa * f2 * y
+        # Backward Euler of S·Θ̂' = −(AΘ̂ − c) with S = G⁻¹: Γ⁻¹ (TQ (50)) or RΓ⁻¹ (TQ (54),
+        # G = ΓK = ΓR⁻¹), i.e. (S + Ts·A)Θ̂⁺ = S·Θ̂ + Ts·c. Never forms K = R⁻¹, which grows
+        # as e^{ℓt} along a direction Φ_f does not excite (TQ (53) without PE).
         if time_varying:
-            det_r = r11 * r22 - r12 * r12
-            k11 = r22 / det_r
-            k12 = -r12 / det_r
-            k22 = r11 / det_r
-            g11 = gamma1 * k11
-            g12 = gamma1 * k12
-            g21 = gamma2 * k12
-            g22 = gamma2 * k22
+            s11 = r11 * (1.0 + R_FLOOR) / gamma1
+            s12 = r12 / gamma2
+            s21 = r12 / gamma1
+            s22 = r22 * (1.0 + R_FLOOR) / gamma2
         else:
-            g11 = gamma1
-            g12 = 0.0
-            g21 = 0.0
-            g22 = gamma2
-        # M = I + Ts·G·A, rhs = Θ̂ + Ts·G·c
-        m11 = 1.0 + Ts * (g11 * a11 + g12 * a12)
-        m12 = Ts * (g11 * a12 + g12 * a22)
-        m21 = Ts * (g21 * a11 + g22 * a12)
-        m22 = 1.0 + Ts * (g21 * a12 + g22 * a22)
-        s1 = th1 + Ts * (g11 * c1 + g12 * c2)
-        s2 = th2 + Ts * (g21 * c1 + g22 * c2)
+            s11 = 1.0 / gamma1
+            s12 = 0.0
+            s21 = 0.0
+            s22 = 1.0 / gamma2
+        m11 = s11 + Ts * a11
+        m12 = s12 + Ts * a12
+        m21 = s21 + Ts * a12
+        m22 = s22 + Ts * a22
+        v1 = s11 * th1 + s12 * th2 + Ts * c1
+        v2 = s21 * th1 + s22 * th2 + Ts * c2
         det_m = m11 * m22 - m12 * m21
-        th1 = (m22 * s1 - m12 * s2) / det_m
-        th2 = (m11 * s2 - m21 * s1) / det_m
+        size = abs(m11 * m22) + abs(m12 * m21)
+        if size > 1e-280 and det_m != 0.0 and math.isfinite(det_m):  # else no data: keep Θ̂
+            th1, th2 = (m22 * v1 - m12 * v2) / det_m, (m11 * v2 - m21 * v1) / det_m
         # TQ (45), (53): exact ZOH steps of the linear matrix filters
         o11 = cb * f1 * f1
         o12 = cb * f1 * f2

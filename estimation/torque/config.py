@@ -1,17 +1,28 @@
 """Typed configurations of the torque estimators (TQ §III, §V; ALGORITHMS.md §5).
 
 Defaults are the paper's simulation values (TQ §VI): ``k = 0.01 s``, ``λ1 = 150 N·m``,
-``ℓ = 10 s⁻¹``, ``Γ = diag(0.1, 100)``, ``κ = 0.1``. The inertia defaults to the SI plant's
+``ℓ = 10 s⁻¹``, ``Γ = diag(0.1, 100)`` for TQ (50), ``κ = 0.1``. TQ gives no Γ for (54) but
+a scalar (Theorem 4); see :class:`AdaptiveTvConfig`. The inertia defaults to the SI plant's
 scaled ``J`` (N·m·s/rpm, since ``N`` is in rpm); set it to the engine's own value (the rig's
 is in its scenario truth, ``J_nm_s_per_rpm``). The paper gives no ``K0`` for TQ (52); its
 effect decays as ``e^{−ℓt}`` (TQ (53)), so the default only shapes the first second.
+
+Units matter for TQ (50), not (54): with ``ṁ_ai`` in kg/s (TQ Table I) the constant gain
+``Γ2 = 100`` moves θ2 at ``Γ2·λ(P) ≈ 100·ṁ_ai²/ℓ ≈ 3·10⁻³ s⁻¹``, i.e. not at all, so (50)
+adapts θ1 alone (``τ̂_e ≈ N·θ̂1``); TQ's ratio Γ2/Γ1 = 1000 would balance the two only with
+``ṁ_ai`` of order ``N/30`` (kg/h). (54) normalises by ``K ≈ P⁻¹`` and does not care.
 """
 
 from __future__ import annotations
 
+from typing import Literal
+
 from pydantic import BaseModel, ConfigDict, Field
 
 from estimation.plants.torque import AIR_CHANNEL, LOAD_CHANNEL, SPEED_CHANNEL, SiEngineParams
+
+AIR_UNIT_SCALE: dict[str, float] = {"kg/s": 1.0, "g/s": 1.0e3, "kg/h": 3.6e3}
+"""Factor from the measured ṁ_ai [kg/s] to the unit it enters the regressor Φ in."""
 
 DEFAULT_J_NM_S_PER_RPM: float = SiEngineParams().J_nm_s_per_rpm
 """Scaled crankshaft inertia of the SI plant, ``inertia·2π/60`` [N·m·s/rpm]."""
@@ -67,13 +78,18 @@ class AdaptiveConfig(TorqueEstimatorConfig):
     air_channel: str = Field(
         AIR_CHANNEL, min_length=1, description="Measured intake air mass flow ṁ_ai [kg/s]."
     )
+    air_unit: Literal["kg/s", "g/s", "kg/h"] = Field(
+        "kg/s",
+        description="Unit of ṁ_ai inside Φ = [N, ṁ_ai] (TQ Table I: kg/s). It sets the units "
+        "of θ2, theta0[1] and K0[1], and what Γ2 of TQ (50) means (module docstring).",
+    )
     ell: float = Field(
         10.0, gt=0.0, description="Forgetting rate ℓ of P, Q (TQ (45)) and K (TQ (52)) [1/s]."
     )
     gamma: tuple[float, float] = Field(
         (0.1, 100.0),
-        description="Diagonal of the learning gain Γ of TQ (50)/(54), for θ1 [N·m/rpm] and "
-        "θ2 [N·m/(kg/s)] (paper: diag(0.1, 100)).",
+        description="Diagonal of the constant learning gain Γ of TQ (50), for θ1 and θ2 "
+        "[1/(rpm²·s²), 1/((air unit)²·s²)] (paper: diag(0.1, 100)).",
     )
     kappa: float = Field(
         0.1,
@@ -83,7 +99,7 @@ class AdaptiveConfig(TorqueEstimatorConfig):
     )
     theta0: tuple[float, float] = Field(
         (0.0, 0.0),
-        description="Initial estimate Θ̂(0) = [θ1 N·m/rpm, θ2 N·m/(kg/s)] (paper: zero).",
+        description="Initial estimate Θ̂(0) = [θ1 N·m/rpm, θ2 N·m/(air unit)] (paper: zero).",
     )
 
 
@@ -97,13 +113,15 @@ class AdaptiveTvConfig(AdaptiveConfig):
 
     K0: tuple[float, float] = Field(
         (1.0, 1.0e-6),
-        description="Diagonal of K0 = K(0)⁻¹ of TQ (52), positive [rpm²·s, (kg/s)²·s]; "
-        "not given in TQ, forgotten as e^{−ℓt}.",
+        description="Diagonal of K0 = K(0)⁻¹ of TQ (52), positive [rpm²·s, (air unit)²·s]; "
+        "not given in TQ, forgotten as e^{−ℓt} (TQ (53)), so it shapes only the first second.",
     )
     gamma: tuple[float, float] = Field(
-        (10.0, 10.0),
-        description="Diagonal of Γ in TQ (54) [1/s]. TQ's stability proof (Theorem 4) takes Γ "
-        "scalar and gives no value; the (50) gain diag(0.1, 100) makes ΓK lose definiteness "
-        "and (54) diverge on our plants, so the default is scalar (10 chosen on torque-si "
-        "seed 0 from 1, 10, 30, 100, 300, 1000).",
+        (100.0, 100.0),
+        description="Diagonal of Γ in TQ (54) [1/s]; K ≈ P⁻¹ makes it a rate, independent of the "
+        "units of Φ. TQ's Theorem 4 needs Γ scalar and gives no value (diag(0.1, 100) is stated "
+        "for (50)); with that diagonal ΓK(P + κΦ_fᵀΦ_f) has an unstable eigenvalue on about "
+        "half the samples of both scenarios when κ = 0.1, and (54) diverges. Default: the "
+        "scalar 1/k = 100, TQ's larger Γ entry and the bandwidth of the filtered data y that "
+        "drives the law.",
     )

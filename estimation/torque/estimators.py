@@ -5,8 +5,9 @@ interface.
 (TQ (50)) and ``adaptive-tv`` (TQ (52), (54)) read the measured speed ``N`` [rpm], load torque
 ``τ_l`` [N·m] and (adaptive laws) the air mass flow ``ṁ_ai`` [kg/s], and output the effective
 torque estimate ``torque_nm`` per sample; the adaptive laws also output ``theta1``
-[N·m/rpm], ``theta2`` [N·m/(kg/s)] and ``pe_lambda_min`` = ``λ_min(P)`` (the persistent
-excitation monitor of TQ Remark 9). Discretisation: :mod:`estimation.kernels.torque`.
+[N·m/rpm], ``theta2`` [N·m per ``air_unit`` of ṁ_ai] and ``pe_lambda_min`` = ``λ_min(P)``
+(the persistent excitation monitor of TQ Remark 9, in the mixed units of P: rpm², (air
+unit)², rpm·(air unit), times s). Discretisation: :mod:`estimation.kernels.torque`.
 
 State is explicit (:class:`TorqueState`): frozen, serialisable, with the step count, so
 ``run(..., state=snapshot.state)`` resumes bit-identically. :func:`initial_state` and
@@ -28,6 +29,7 @@ from estimation.estimator import EstimatorSpec, Snapshot
 from estimation.kernels import torque as kt
 from estimation.signals import Signals
 from estimation.torque.config import (
+    AIR_UNIT_SCALE,
     AdaptiveConfig,
     AdaptiveConstConfig,
     AdaptiveTvConfig,
@@ -182,6 +184,7 @@ def run_chunk(
             speed,
             load,
             air,
+            AIR_UNIT_SCALE[config.air_unit],
             J,
             k,
             float(config.ell),

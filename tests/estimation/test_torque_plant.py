@@ -204,6 +204,16 @@ def test_speed_follows_tq_profile(si_run, t0, t1, speed, tol):
     assert np.max(np.abs(n - speed)) < tol + 5.0  # ripple is a few rpm
 
 
+def test_speed_setpoint_steps_at_tq_instants(si_run):
+    """TQ §VI: N = 2200 → 2500 → 2200 → 1900 rpm *at* t = 0, 4, 12, 14 s (steps by default)."""
+    signals, truth = si_run
+    ref = signals["speed_setpoint_rpm"]
+    t = truth.time_s
+    jumps = np.flatnonzero(np.diff(ref) != 0.0)
+    assert np.all(np.abs(t[jumps + 1] - [4.0, 12.0, 14.0]) <= 1e-3 + 1e-9)  # next sample
+    assert_allclose(ref[jumps + 1], [2500.0, 2200.0, 1900.0])
+
+
 def test_rig_sweeps_speed_and_load(rig_run):
     signals, truth = rig_run
     w = truth.time_s > 1.0
@@ -237,15 +247,25 @@ def test_truth_parameterisation_tq41(plant, si_run, rig_run):
 @pytest.mark.parametrize("plant", ["si", "rig"])
 def test_noise_statistics(plant, si_run, rig_run):
     signals, truth = si_run if plant == "si" else rig_run
+    p = SiEngineParams() if plant == "si" else DieselRigParams()
     n = len(signals)
-    for meas, true in [
-        (signals["speed_rpm"], truth.speed_rpm),
-        (signals["load_torque_nm"], truth.load_torque_nm),
+    for meas, true, std in [
+        (signals["speed_rpm"], truth.speed_rpm, p.speed_noise_std_rpm),
+        (signals["load_torque_nm"], truth.load_torque_nm, p.load_noise_std_nm),
     ]:
         w = meas - true
-        assert abs(np.std(w) / NOISE_STD - 1.0) < 0.02
-        assert abs(np.mean(w)) < 4 * NOISE_STD / math.sqrt(n)
+        assert abs(np.std(w) / std - 1.0) < 0.02
+        assert abs(np.mean(w)) < 4 * std / math.sqrt(n)
     assert np.array_equal(signals["air_mass_flow_kg_s"], truth.air_mass_flow_kg_s)
+
+
+def test_noise_defaults_follow_tq():
+    """§VI: N(0, 20) on N and τ_l (variance 20); the rig's speed noise is bounded by Table VI."""
+    si, rig = SiEngineParams(), DieselRigParams()
+    assert si.speed_noise_std_rpm == si.load_noise_std_nm == rig.load_noise_std_nm == NOISE_STD
+    k = 0.01  # TQ's filter constant [s]
+    assert rig.J_nm_s_per_rpm / k * rig.speed_noise_std_rpm < 2.91  # Table VI UIO SD [N·m]
+    assert si.J_nm_s_per_rpm / k * si.speed_noise_std_rpm < 2.81  # Table III UIO SD [N·m]
 
 
 def test_noise_level_is_configurable():
@@ -316,7 +336,7 @@ def test_to_dict_is_json(si_run):
     _, truth = si_run
     d = json.loads(json.dumps(truth.to_dict()))
     assert len(d["torque_nm"]) == len(truth.time_s)
-    assert d["J_nm_s_per_rpm"] == pytest.approx(0.15 * 2 * math.pi / 60)
+    assert d["J_nm_s_per_rpm"] == pytest.approx(SiEngineParams().inertia_kg_m2 * 2 * math.pi / 60)
     json.dumps(SiEngineParams().to_dict())
     json.dumps(DieselRigParams().to_dict())
 
@@ -337,6 +357,7 @@ def test_default_duration_and_rate():
         ({"params": replace(SiEngineParams(), inertia_kg_m2=0.0)}, "inertia_kg_m2"),
         ({"params": replace(SiEngineParams(), profile_speeds_rpm=(2200.0,))}, "equally long"),
         ({"params": replace(SiEngineParams(), speed_ramp_s=5.0)}, "speed_ramp_s"),
+        ({"params": replace(SiEngineParams(), speed_ramp_s=-0.1)}, "speed_ramp_s"),
         ({"params": replace(SiEngineParams(), load_coef=(400.0, 0.0))}, "full-throttle"),
         ({"params": replace(SiEngineParams(), speed_noise_std_rpm=-1.0)}, "speed_noise"),
     ],

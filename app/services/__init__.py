@@ -1,0 +1,1 @@
+"""Use cases: what the API and the CLI do, in terms of repositories and the numerical core."""

@@ -1,0 +1,213 @@
+"""Sample gates: which log samples a run may learn from, and why the others were rejected.
+
+A run's config holds a list of gates over the dataset's channels (the answer to "why did
+my map not learn here?"):
+
+- ``{"type": "range", "channel": c, "min": a, "max": b}`` rejects sample k when
+  ``x_k < a`` or ``x_k > b`` (bounds themselves pass; either bound may be omitted);
+- ``{"type": "rate", "channel": c, "max_abs": r}`` rejects k when ``|ẋ_k| > r`` (units/s),
+  ``ẋ_k = (x_k − x_{k−1}) / (t_k − t_{k−1})`` (backward difference; sample 0 takes
+  sample 1's value);
+- ``{"type": "holdoff", "channel": c, "below" | "above": v, "seconds": s}`` rejects k when
+  the event ``x_j < v`` (or ``x_j > v``) held at some ``j ≤ k`` with ``t_k − t_j ≤ s``: the
+  samples during the event and ``s`` seconds after it (e.g. 2 s after fuel cut-off).
+
+Everything is vectorised numpy over the whole log (no per-sample Python).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Collection, Sequence
+from dataclasses import dataclass
+from typing import Annotated, Any, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError, model_validator
+
+from app.io.errors import InputError
+from estimation import Signals
+
+FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+
+
+class _Gate(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    channel: str = Field(min_length=1)
+
+
+class RangeGate(_Gate):
+    """Reject samples outside ``[min, max]`` (units of the channel)."""
+
+    type: Literal["range"] = "range"
+    min: FiniteFloat | None = None
+    max: FiniteFloat | None = None
+
+    @model_validator(mode="after")
+    def _bounds(self) -> RangeGate:
+        if self.min is None and self.max is None:
+            raise ValueError("a range gate needs 'min', 'max' or both")
+        if self.min is not None and self.max is not None and self.min > self.max:
+            raise ValueError(f"min {self.min:g} is above max {self.max:g}")
+        return self
+
+
+class RateGate(_Gate):
+    """Reject samples whose rate of change exceeds ``max_abs`` (channel units per second)."""
+
+    type: Literal["rate"] = "rate"
+    max_abs: FiniteFloat = Field(gt=0)
+
+
+class HoldoffGate(_Gate):
+    """Reject samples within ``seconds`` after the channel was below/above a threshold."""
+
+    type: Literal["holdoff"] = "holdoff"
+    below: FiniteFloat | None = None
+    above: FiniteFloat | None = None
+    seconds: FiniteFloat = Field(ge=0)
+
+    @model_validator(mode="after")
+    def _one_condition(self) -> HoldoffGate:
+        if (self.below is None) == (self.above is None):
+            raise ValueError("a holdoff gate needs exactly one of 'below' or 'above'")
+        return self
+
+
+Gate = Annotated[RangeGate | RateGate | HoldoffGate, Field(discriminator="type")]
+_GATES = TypeAdapter(list[Gate])
+
+
+@dataclass(frozen=True, slots=True)
+class GateResult:
+    """Outcome of the gates over a log of ``n`` samples.
+
+    ``masks[label]`` is True where that gate rejects (each gate on its own);
+    ``rejected[label]`` counts samples attributed to the first gate (in list order) that
+    rejects them, so ``sum(rejected.values()) == (~accept).sum()``; ``failed[label]``
+    counts every sample the gate rejects.
+    """
+
+    accept: np.ndarray
+    masks: dict[str, np.ndarray]
+    rejected: dict[str, int]
+    failed: dict[str, int]
+
+    def first_gate(self) -> dict[str, np.ndarray]:
+        """label → mask of the samples attributed to that gate (disjoint)."""
+        out, taken = {}, np.zeros_like(self.accept)
+        for label, mask in self.masks.items():
+            out[label] = mask & ~taken
+            taken |= mask
+        return out
+
+
+def parse_gates(
+    raw: Any, channels: Collection[str], *, field: str = "config.gates"
+) -> list[RangeGate | RateGate | HoldoffGate]:
+    """Validated gates; :class:`InputError` names the field, e.g. ``config.gates[1].channel``."""
+    if raw is None:
+        return []
+    try:
+        gates = _GATES.validate_python(raw)
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        loc = [str(p) for p in err["loc"]]
+        # pydantic puts the discriminator tag in the path ("0", "range", "max"): drop it.
+        path = field
+        if loc:
+            path += f"[{loc[0]}]"
+            rest = [p for p in loc[1:] if p not in ("range", "rate", "holdoff")]
+            path += "".join(f".{p}" for p in rest)
+        message = err["msg"].removeprefix("Value error, ")
+        raise InputError(f"{path}: {message}", field=path) from None
+    for i, gate in enumerate(gates):
+        if gate.channel not in channels:
+            raise InputError(
+                f"{field}[{i}].channel: unknown channel {gate.channel!r}; "
+                f"the dataset has {sorted(channels)}",
+                field=f"{field}[{i}].channel",
+            )
+    return gates
+
+
+def gate_labels(gates: Sequence[RangeGate | RateGate | HoldoffGate]) -> list[str]:
+    """``type:channel`` per gate, with ``#2``, ``#3`` … on repeats."""
+    labels: list[str] = []
+    for gate in gates:
+        base = f"{gate.type}:{gate.channel}"
+        n = sum(1 for lab in labels if lab == base or lab.startswith(base + "#"))
+        labels.append(base if n == 0 else f"{base}#{n + 1}")
+    return labels
+
+
+def gate_mask(gate: RangeGate | RateGate | HoldoffGate, signals: Signals) -> np.ndarray:
+    """``(n,)`` bool, True where ``gate`` rejects the sample."""
+    x = signals[gate.channel]
+    t = signals.time
+    if isinstance(gate, RangeGate):
+        low = -math.inf if gate.min is None else gate.min
+        high = math.inf if gate.max is None else gate.max
+        return (x < low) | (x > high)
+    if isinstance(gate, RateGate):
+        if x.size < 2:
+            return np.zeros(x.size, dtype=bool)
+        rate = np.abs(np.diff(x) / np.diff(t))
+        return np.concatenate([rate[:1], rate]) > gate.max_abs
+    event = x < gate.below if gate.below is not None else x > gate.above
+    last_event = np.maximum.accumulate(np.where(event, t, -np.inf))
+    return (t - last_event) <= gate.seconds
+
+
+def apply_gates(
+    gates: Sequence[RangeGate | RateGate | HoldoffGate], signals: Signals
+) -> GateResult:
+    """Accept mask and rejection counts of ``gates`` over ``signals``."""
+    n = len(signals)
+    masks = {
+        label: gate_mask(gate, signals)
+        for label, gate in zip(gate_labels(gates), gates, strict=True)
+    }
+    accept = np.ones(n, dtype=bool)
+    rejected: dict[str, int] = {}
+    for label, mask in masks.items():
+        rejected[label] = int(np.count_nonzero(mask & accept))
+        accept &= ~mask
+    failed = {label: int(np.count_nonzero(mask)) for label, mask in masks.items()}
+    return GateResult(accept, masks, rejected, failed)
+
+
+def nearest_cell(idx: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """``(n,)`` flat index of each sample's heaviest regressor corner (its grid node)."""
+    return np.take_along_axis(idx, np.argmax(w, axis=1)[:, None], axis=1)[:, 0]
+
+
+def rejected_per_cell(
+    result: GateResult,
+    idx: np.ndarray,
+    w: np.ndarray | None,
+    n_cells: int,
+    *,
+    attributed: bool = True,
+) -> dict[str, np.ndarray]:
+    """Rejected samples per cell and gate.
+
+    ``idx``: ``(n,)`` flat cell of each sample (counts are integers), or the regressor's
+    ``(n, 2^d)`` indices with weights ``w`` (counts are interpolation-weighted, so a sample
+    counts once in total, split over its corners). ``attributed``: use the disjoint
+    first-gate attribution (else each gate's own mask).
+    """
+    masks = result.first_gate() if attributed else result.masks
+    idx = np.asarray(idx)
+    out: dict[str, np.ndarray] = {}
+    for label, mask in masks.items():
+        if idx.ndim == 1:
+            out[label] = np.bincount(idx[mask], minlength=n_cells)[:n_cells]
+        else:
+            if w is None:
+                raise ValueError("regressor indices (n, 2^d) need their weights w")
+            out[label] = np.bincount(
+                idx[mask].ravel(), weights=np.asarray(w)[mask].ravel(), minlength=n_cells
+            )[:n_cells]
+    return out

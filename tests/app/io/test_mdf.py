@@ -1,0 +1,163 @@
+"""MDF4 written with asammdf ingests equal (resampled where the groups' rates differ),
+and broken or hostile MDF files get the right error."""
+
+from __future__ import annotations
+
+import io
+import struct
+
+import numpy as np
+import pytest
+from asammdf import MDF, Signal
+
+from app.io.errors import InputError
+from app.io.ingest import IngestLimits, ingest
+
+pytestmark = [
+    pytest.mark.filterwarnings("ignore::DeprecationWarning"),
+    # asammdf's MDF4.__del__ trips over the half-built object of a file it refused.
+    pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning"),
+]
+
+
+def mdf_bytes(groups: list[list[Signal]], *, compression: int = 0, version: str = "4.10") -> bytes:
+    mdf = MDF(version=version)
+    for signals in groups:
+        mdf.append(signals)
+    buffer = io.BytesIO()
+    mdf.save(buffer, compression=compression)
+    mdf.close()
+    return buffer.getvalue()
+
+
+TIME = np.arange(0, 2.0, 0.01)
+RNG = np.random.default_rng(0)
+RPM = RNG.uniform(800, 4000, TIME.size)
+LOAD = RNG.normal(0, 1e-3, TIME.size)
+
+
+@pytest.mark.parametrize("compression", [0, 2])
+def test_one_group_ingests_bit_exactly(compression: int) -> None:
+    data = mdf_bytes(
+        [[Signal(RPM, TIME, name="rpm", unit="1/min"), Signal(LOAD, TIME, name="load", unit="%")]],
+        compression=compression,
+    )
+    ds = ingest(data)
+    assert (ds.source, ds.time_column, ds.rows, ds.notes) == ("mdf4", "time", TIME.size, ())
+    assert ds.channels == [{"name": "rpm", "unit": "1/min"}, {"name": "load", "unit": "%"}]
+    np.testing.assert_array_equal(ds.signals.time, TIME)
+    np.testing.assert_array_equal(ds.signals["rpm"], RPM)
+    np.testing.assert_array_equal(ds.signals["load"], LOAD)
+    assert ds.rate_hz == pytest.approx(100.0)
+
+
+def test_integer_channels_become_float_and_text_is_skipped() -> None:
+    t = np.arange(10) * 0.1
+    gear = np.arange(10, dtype=np.uint8) % 6
+    text = np.array([b"idle"] * 10)
+    data = mdf_bytes(
+        [[Signal(gear, t, name="gear"), Signal(text, t, name="state", encoding="latin-1")]]
+    )
+    ds = ingest(data)
+    assert ds.signals.names == ["gear"]
+    np.testing.assert_array_equal(ds.signals["gear"], gear.astype(float))
+    assert any("'state' skipped" in n for n in ds.notes)
+
+
+def test_groups_at_different_rates_are_resampled_onto_the_fastest() -> None:
+    slow_t = np.arange(0.05, 1.96, 0.1)
+    temp = 80 + slow_t**2
+    data = mdf_bytes(
+        [
+            [Signal(RPM, TIME, name="rpm", unit="1/min")],
+            [Signal(temp, slow_t, name="temp", unit="degC")],
+        ]
+    )
+    ds = ingest(data)
+    keep = (slow_t[0] <= TIME) & (slow_t[-1] >= TIME)
+    np.testing.assert_array_equal(ds.signals.time, TIME[keep])
+    np.testing.assert_array_equal(ds.signals["rpm"], RPM[keep])
+    np.testing.assert_allclose(ds.signals["temp"], np.interp(TIME[keep], slow_t, temp), rtol=1e-15)
+    assert any("resampled linearly" in n for n in ds.notes)
+
+
+def test_mdf3_reads_too(tmp_path) -> None:
+    mdf = MDF(version="3.30")
+    mdf.append([Signal(RPM, TIME, name="rpm", unit="1/min")])
+    mdf.save(tmp_path / "log.mdf")
+    mdf.close()
+    ds = ingest(tmp_path / "log.mdf")
+    np.testing.assert_array_equal(ds.signals["rpm"], RPM)
+
+
+def patch_dz_original_size(data: bytes, size: int) -> bytes:
+    start = data.index(b"##DZ")
+    out = bytearray(data)
+    struct.pack_into("<Q", out, start + 32, size)
+    return bytes(out)
+
+
+def bad_mdfs() -> list:
+    good = mdf_bytes([[Signal(RPM, TIME, name="rpm")]])
+    zipped = mdf_bytes(
+        [[Signal(np.zeros(200_000), np.arange(200_000) * 0.01, name="z")]], compression=2
+    )
+    nan = RPM.copy()
+    nan[17] = np.nan
+    return [
+        ("truncated", good[: len(good) // 2], "validation_error", "file", "unreadable MDF"),
+        (
+            "magic then garbage",
+            b"MDF     4.10    " + bytes(200),
+            "validation_error",
+            "file",
+            "unreadable MDF",
+        ),
+        (
+            "unknown version",
+            b"MDF     9.99    " + bytes(64),
+            "unsupported_format",
+            "file",
+            "version '9.99'",
+        ),
+        (
+            "NaN sample",
+            mdf_bytes([[Signal(nan, TIME, name="rpm")]]),
+            "validation_error",
+            "rpm",
+            "non-finite value (nan) at sample 17",
+        ),
+        (
+            "duplicate time",
+            mdf_bytes([[Signal(RPM[:3], np.array([0.0, 0.1, 0.1]), name="x")]]),
+            "validation_error",
+            "time",
+            "duplicate time",
+        ),
+        (
+            "only text",
+            mdf_bytes([[Signal(np.array([b"a"] * 3), TIME[:3], name="s", encoding="latin-1")]]),
+            "validation_error",
+            "file",
+            "no numeric channels",
+        ),
+        ("decompression bomb", zipped, "payload_too_large", "file", "inflate to more than"),
+        (
+            "lying zipped block",
+            patch_dz_original_size(zipped, 1000),
+            "validation_error",
+            "file",
+            "inflates to a different size",
+        ),
+    ]
+
+
+@pytest.mark.parametrize(
+    ("data", "code", "field", "message"), [pytest.param(*c[1:], id=c[0]) for c in bad_mdfs()]
+)
+def test_bad_mdf_corpus(data: bytes, code: str, field: str, message: str) -> None:
+    with pytest.raises(InputError) as info:
+        ingest(data, limits=IngestLimits(max_decompressed_bytes=1_000_000))
+    err = info.value
+    assert (err.code, err.field) == (code, field), str(err)
+    assert message in err.message
