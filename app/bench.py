@@ -255,9 +255,9 @@ def simulators() -> dict[str, dict[str, float]]:
         "vehicle model, WLTC 1800 s at 50 Hz": (
             lambda: operating_points(wltc, rate_hz=50.0), wltc.duration_s, 50.0
         ),
-        "air path, WLTC 1800 s, 500 Hz internal": (
+        "air path, WLTC 1800 s, 2 kHz internal": (
             lambda: simulate_airpath(points.time_s, fuel, speed, seed=0, rate_hz=10.0),
-            float(points.time_s[-1]), 500.0,
+            float(points.time_s[-1]), 2000.0,
         ),
         "NOx sensor, 1800 s at 50 Hz": (
             lambda: simulate_nox(points.time_s, speed, fuel, seed=0),

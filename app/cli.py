@@ -224,6 +224,41 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _reproduce_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "reproduce",
+        help="regenerate the report: the papers' figures and tables beside ours",
+        description="Run the papers' cases live (SKF simulations 1-3, NOx, LPV, EKF Table 1, "
+        "torque Tables III/IV/VI/VII) and write DIR/report.md and DIR/report.html (one "
+        "offline Plotly page). Exit code 1 if a section failed (the report is still written).",
+    )
+    p.add_argument(
+        "--out", type=Path, default=Path("reproduce"), metavar="DIR", help="default ./reproduce"
+    )
+    p.add_argument("--seeds", default="0,1,2", metavar="S1,S2,...", help="default 0,1,2")
+    p.add_argument(
+        "--only", metavar="SECTIONS", help="comma-separated subset of skf,nox,lpv,ekf,torque"
+    )
+    p.set_defaults(handler=_cmd_reproduce)
+
+
+def _cmd_reproduce(args: argparse.Namespace) -> int:
+    from app.reproduce import SECTION_KEYS, parse_only, parse_seeds, reproduce
+
+    seeds = parse_seeds(args.seeds)
+    only = parse_only(args.only) if args.only is not None else SECTION_KEYS
+    done = reproduce(
+        args.out, seeds=seeds, only=only, progress=lambda line: print(line, file=sys.stderr)
+    )
+    for section, seconds in done.sections:
+        print(f"{section.key:<7} {seconds:6.1f} s  {section.verdict}")
+    print(f"wrote {done.markdown} and {done.html} in {done.seconds:.1f} s")
+    if done.failed:
+        print(f"mapwise: sections failed: {', '.join(done.failed)}", file=sys.stderr)
+        return 1
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="mapwise", description=__doc__.splitlines()[0] if __doc__ else None)
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
@@ -231,6 +266,7 @@ def build_parser() -> argparse.ArgumentParser:
     _run_parser(sub)
     _simulate_parser(sub)
     _bench_parser(sub)
+    _reproduce_parser(sub)
     return parser
 
 

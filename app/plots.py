@@ -3,6 +3,8 @@ installed ``plotly`` package, so the page works offline)."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from html import escape
 from pathlib import Path
 
 import numpy as np
@@ -51,6 +53,28 @@ def scenario_page(data: ScenarioData, path: str | Path) -> None:
         template="plotly_white",
     )
     fig.write_html(str(path), include_plotlyjs=True, full_html=True)
+
+
+def offline_page(
+    title: str, parts: Sequence[str | go.Figure], path: str | Path, *, css: str = ""
+) -> None:
+    """One self-contained page: HTML fragments and figures in order, Plotly.js inlined once
+    in the head (from the installed package: no CDN, works offline)."""
+    from plotly.offline import get_plotlyjs
+
+    body = [
+        part.to_html(full_html=False, include_plotlyjs=False, config={"responsive": True})
+        if isinstance(part, go.Figure)
+        else part
+        for part in parts
+    ]
+    Path(path).write_text(
+        '<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
+        f"<title>{escape(title)}</title>\n"
+        f'<script type="text/javascript">{get_plotlyjs()}</script>\n'
+        f"<style>{css}</style>\n</head>\n<body>\n" + "\n".join(body) + "\n</body>\n</html>\n",
+        encoding="utf-8",
+    )
 
 
 def _add_map(fig: go.Figure, table: Table, points: np.ndarray, *, row: int) -> None:

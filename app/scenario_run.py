@@ -17,15 +17,17 @@ which then takes the ``rmse`` key (a map's own RMSE moves to ``map_rmse``).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from app.adapt import map_document
 from estimation.errors import ConfigError
-from estimation.estimator import get_spec
+from estimation.estimator import Estimator, Snapshot, get_spec
 from estimation.metrics import map_metrics, output_metrics, torque_metrics
 from estimation.scenarios import ScenarioData, get_scenario
 
@@ -76,13 +78,54 @@ def run_scenario(
     duration_s: float | None = None,
 ) -> dict[str, Any]:
     """Build the scenario, run the estimator over it, and score the result."""
+    return execute_scenario(
+        scenario_name, estimator_name, seed=seed, overrides=overrides, duration_s=duration_s
+    ).result
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class ScenarioRun:
+    """A scored run with what produced it, for reports and plots.
+
+    ``result`` is what :func:`run_scenario` returns; ``final`` the last snapshot with its
+    ``outputs`` and ``status`` covering the whole record; ``history`` (only with ``every``)
+    the snapshot after each chunk, without state or outputs (time, table, variance).
+    """
+
+    result: dict[str, Any]
+    data: ScenarioData
+    final: Snapshot
+    history: tuple[Snapshot, ...] = ()
+
+
+def execute_scenario(
+    scenario_name: str,
+    estimator_name: str,
+    *,
+    seed: int = 0,
+    overrides: dict[str, Any] | None = None,
+    duration_s: float | None = None,
+    data: ScenarioData | None = None,
+    every: int | None = None,
+) -> ScenarioRun:
+    """:func:`run_scenario` keeping the data and the final snapshot.
+
+    ``data``: a realisation of the scenario already built (same name and seed), reused
+    instead of simulating again. ``every``: run in chunks of that many samples and keep the
+    snapshot after each (resuming equals the uninterrupted run, so the score is the same).
+    """
     scenario = get_scenario(scenario_name)
     spec = get_spec(estimator_name)
     config = merge(scenario.default_config(estimator_name), overrides or {})
     estimator = spec.build(config)
-    data = scenario.build(seed=seed, duration_s=duration_s)
+    if data is None:
+        data = scenario.build(seed=seed, duration_s=duration_s)
+    elif data.scenario != scenario.name or data.seed != seed:
+        raise ConfigError(
+            f"data of {data.scenario!r} seed {data.seed} given for {scenario.name!r} seed {seed}"
+        )
     t0 = time.perf_counter()
-    final = estimator.fit(data.signals)  # type: ignore[attr-defined]
+    final, history = _run_chunked(estimator, data, every)
     estimate_s = time.perf_counter() - t0
     result: dict[str, Any] = {
         "scenario": scenario.name,
@@ -104,7 +147,23 @@ def run_scenario(
         metrics = {}
     metrics |= series_metrics(data, final.outputs)
     result["metrics"] = {k: _finite_or_none(v) for k, v in metrics.items()}
-    return result
+    return ScenarioRun(result=result, data=data, final=final, history=history)
+
+
+def _run_chunked(
+    estimator: Estimator, data: ScenarioData, every: int | None
+) -> tuple[Snapshot, tuple[Snapshot, ...]]:
+    if every is None:
+        return estimator.fit(data.signals), ()  # type: ignore[attr-defined]
+    snapshots = list(estimator.run(data.signals, every=every))
+    last = snapshots[-1]
+    outputs = {name: np.concatenate([s.outputs[name] for s in snapshots]) for name in last.outputs}
+    status = None
+    if last.status is not None:
+        status = np.concatenate([s.status for s in snapshots if s.status is not None])
+    final = dataclasses.replace(last, chunk_start=0, outputs=outputs, status=status)
+    history = tuple(dataclasses.replace(s, state=None, outputs={}, status=None) for s in snapshots)
+    return final, history
 
 
 TORQUE_WINDOW_S = (5.0, 30.0)  # TQ §VI: indices over 5–30 s

@@ -113,10 +113,11 @@ def describe_validation_error(exc: ValidationError) -> str:
 def registry() -> dict[str, EstimatorSpec]:
     """Every built-in estimator by name."""
     from estimation.filters.estimator import FILTER_SPECS
+    from estimation.observers.ekf import EKF_SPECS
     from estimation.observers.lpv import LPV_SPECS
     from estimation.torque import TORQUE_SPECS
 
-    return {spec.name: spec for spec in (*FILTER_SPECS, *LPV_SPECS, *TORQUE_SPECS)}
+    return {spec.name: spec for spec in (*FILTER_SPECS, *LPV_SPECS, *EKF_SPECS, *TORQUE_SPECS)}
 
 
 def get_spec(name: str) -> EstimatorSpec:

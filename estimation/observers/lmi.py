@@ -12,12 +12,25 @@ then ``L = P⁻¹Y``. The raw units (Pa, rad/s, kg/s against ρ ~ 1e−7) make t
 ill-conditioned, so it is posed for the scaled model ``x = S_x x̃``, ``y = S_y ỹ``
 (``Ã = S_x⁻¹AS_x``, ``C̃ = S_y⁻¹CS_x``, ``G̃ = S_y⁻¹G S_θ`` with ``S_θ = S_y[2]``), solved with
 cvxpy + Clarabel, and mapped back: ``L = S_x L̃ S_y⁻¹``.
+
+**Gain structure.** ``structure="decoupled"`` (default) restricts the search to
+``P = blkdiag(P_12, p_3)`` and ``Y[2,0] = Y[2,2] = 0``, so ``L = P⁻¹Y`` has
+``L[2,0] = L[2,2] = 0``: the turbo-speed estimate is corrected by the turbo-speed
+measurement only (its row of ``A(ρ)`` has no pressure terms either). The adaptive law compares
+``y_m2`` with ``C2(ρ)x̂ = ρ1 ω̂_t``, so whatever is injected into ``ω̂_t`` from the ``p_im``
+residual (model and discretisation error of the fast manifold dynamics) or from the MAF
+residual (which holds the not yet learnt map) goes straight into the map estimate. With the
+paper's fast adaptation (Γ = 200 I) and noise-free signals the map's mean relative error
+drops from 3.4 % to 1.9 % on ``maf-whtc`` and from 1.3 % to 1.1 % on ``maf-ftp75``; with
+the observer's averaging (normalised) gain the two structures score the same. The
+restricted ``P, Y`` are a special case of LPV (28), so Theorem 1 applies unchanged.
 """
 
 from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
@@ -55,6 +68,7 @@ class GainDesign:
     a2: float
     eps1: float
     eps2: float
+    structure: str = "decoupled"
 
     @property
     def hurwitz(self) -> bool:
@@ -103,6 +117,7 @@ def synthesize_gain(
     state_scale: tuple[float, float, float] = DEFAULT_STATE_SCALE,
     output_scale: tuple[float, float, float] = DEFAULT_OUTPUT_SCALE,
     max_P: float = 1.0e4,
+    structure: Literal["decoupled", "full"] = "decoupled",
 ) -> GainDesign:
     """Solve the vertex LMIs of LPV (28)/(35) for the gain ``L = P⁻¹Y``.
 
@@ -114,6 +129,8 @@ def synthesize_gain(
     eps1, eps2 : the fixed ε of LPV (28), both > 0 with ``ε1 + ε2 < 2`` (paper: 0.25, 0.11).
     state_scale, output_scale : scalings ``S_x``, ``S_y`` that make the SDP O(1).
     max_P : bound ``P ⪯ max_P·I`` keeping the scaled design bounded.
+    structure : ``"decoupled"`` (``L[2,0] = L[2,2] = 0``, see the module docstring) or
+        ``"full"`` (any ``P``, ``Y``).
 
     The objective maximises the common margin ``t`` (``M(ρ_w) ⪯ −tI`` at every vertex).
     Raises :class:`ConfigError` on bad inputs or when the SDP is infeasible.
@@ -133,6 +150,8 @@ def synthesize_gain(
         raise ConfigError(f"eps1 and eps2 must be > 0, got {eps1:g} and {eps2:g}")
     if eps1 + eps2 >= 2.0:
         raise ConfigError(f"eps1 + eps2 must be < 2 (LPV (28)), got {eps1:g} + {eps2:g}")
+    if structure not in ("decoupled", "full"):
+        raise ConfigError(f"structure must be 'decoupled' or 'full', got {structure!r}")
     if not (np.isfinite(a1) and a1 > 0 and np.isfinite(a2) and a2 > 0):
         raise ConfigError(f"a1 and a2 must be finite and > 0, got {a1:g} and {a2:g}")
     sx = np.asarray(state_scale, dtype=np.float64)
@@ -148,6 +167,8 @@ def synthesize_gain(
     t = cp.Variable()
     eye3 = np.eye(3)
     constraints = [P >> _STRICT * eye3, Q >> _STRICT * eye3, P << max_P * eye3, t <= 1.0]
+    if structure == "decoupled":
+        constraints += [P[0, 2] == 0, P[1, 2] == 0, Y[2, 0] == 0, Y[2, 2] == 0]
     scaled = []
     for rho in vertices:
         A, C, G, C2 = system_matrices(rho, a1, a2)
@@ -180,7 +201,10 @@ def synthesize_gain(
     Pv = np.asarray(P.value)
     Pv = 0.5 * (Pv + Pv.T)
     Qv = 0.5 * (np.asarray(Q.value) + np.asarray(Q.value).T)
-    Yv = np.asarray(Y.value)
+    Yv = np.array(Y.value, dtype=np.float64)
+    if structure == "decoupled":  # exact zeros, not the solver's ~1e−12
+        Pv[0, 2] = Pv[2, 0] = Pv[1, 2] = Pv[2, 1] = 0.0
+        Yv[2, 0] = Yv[2, 2] = 0.0
     L_scaled = np.linalg.solve(Pv, Yv)
     margins = np.empty(vertices.shape[0])
     eigs = np.empty((vertices.shape[0], 3), dtype=np.complex128)
@@ -220,4 +244,5 @@ def synthesize_gain(
         a2=float(a2),
         eps1=float(eps1),
         eps2=float(eps2),
+        structure=structure,
     )

@@ -1,0 +1,152 @@
+"""``mapwise reproduce``: run every section live and write ``report.md`` and ``report.html``.
+
+Nothing of ours is stored: each section runs the registered estimators on the catalog's
+scenarios (:func:`app.scenario_run.execute_scenario`) for the chosen seeds and puts the
+results beside the papers' constants (:mod:`app.reproduce.paper_values`).
+"""
+
+from __future__ import annotations
+
+import importlib
+import time
+import traceback
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from app.reproduce.report import Section, Table, Text, to_markdown, write_html
+from estimation.errors import ConfigError
+
+DEFAULT_SEEDS = (0, 1, 2)
+DEFAULT_OUT = Path("reproduce")
+TITLE = "mapwise — the four papers' results beside ours"
+
+
+MODULES = {
+    "skf": "app.reproduce.skf_sims",
+    "nox": "app.reproduce.nox",
+    "lpv": "app.reproduce.lpv",
+    "ekf": "app.reproduce.ekf",
+    "torque": "app.reproduce.torque",
+}
+"""Section key → the module whose ``build(seeds)`` makes it, in report order."""
+SECTION_KEYS = tuple(MODULES)
+
+
+def _builder(key: str) -> Callable[[Sequence[int]], Section]:
+    return importlib.import_module(MODULES[key]).build  # type: ignore[no-any-return]
+
+
+@dataclass(frozen=True, slots=True)
+class Reproduced:
+    """What a run wrote, how long each section took [s], and which sections failed."""
+
+    markdown: Path
+    html: Path
+    sections: tuple[tuple[Section, float], ...]
+    seconds: float
+
+    @property
+    def failed(self) -> list[str]:
+        return [s.key for s, _ in self.sections if s.verdict.startswith(FAILED)]
+
+
+FAILED = "FAILED"
+
+
+def _build_section(key: str, seeds: Sequence[int]) -> Section:
+    """Run one section; an exception (other helpers' code may be mid-change) becomes a
+    section that says so, so the rest of the report is still written."""
+    try:
+        return _builder(key)(list(seeds))
+    except Exception as exc:
+        message = " ".join(str(exc).split()) or type(exc).__name__
+        return Section(
+            key=key,
+            title=f"{key}: failed",
+            verdict=f"{FAILED}: {type(exc).__name__}: {message}",
+            blocks=[Text(f"```\n{traceback.format_exc()}```")],
+        )
+
+
+def parse_seeds(text: str) -> tuple[int, ...]:
+    """``"0,1,2"`` → ``(0, 1, 2)``: distinct non-negative integers, in the order given."""
+    seeds: list[int] = []
+    for part in text.split(","):
+        part = part.strip()
+        if not part.isdigit():
+            raise ConfigError(f"--seeds: expected comma-separated integers >= 0, got {text!r}")
+        if int(part) not in seeds:
+            seeds.append(int(part))
+    return tuple(seeds)
+
+
+def parse_only(text: str) -> tuple[str, ...]:
+    """``"skf,torque"`` → the sections in report order; unknown names are an error."""
+    wanted = [p.strip() for p in text.split(",") if p.strip()]
+    unknown = [w for w in wanted if w not in SECTION_KEYS]
+    if unknown or not wanted:
+        raise ConfigError(
+            f"--only: unknown section {', '.join(map(repr, unknown)) or repr(text)}; "
+            f"choose from {','.join(SECTION_KEYS)}"
+        )
+    return tuple(k for k in SECTION_KEYS if k in wanted)
+
+
+def reproduce(
+    out: Path = DEFAULT_OUT,
+    *,
+    seeds: Sequence[int] = DEFAULT_SEEDS,
+    only: Sequence[str] = SECTION_KEYS,
+    progress: Callable[[str], None] | None = None,
+) -> Reproduced:
+    """Run the chosen sections for ``seeds`` and write ``out/report.md`` and
+    ``out/report.html``."""
+    if not seeds:
+        raise ConfigError("--seeds: give at least one seed")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigError(f"--out {out}: {exc.strerror or exc}") from None
+    t0 = time.perf_counter()
+    done: list[tuple[Section, float]] = []
+    for key in only:
+        t = time.perf_counter()
+        section = _build_section(key, seeds)
+        done.append((section, time.perf_counter() - t))
+        if progress is not None:
+            progress(f"{key}: {done[-1][1]:.1f} s")
+    seconds = time.perf_counter() - t0
+    preamble = _preamble(seeds, only, done, seconds)
+    sections = [s for s, _ in done]
+    markdown, html = out / "report.md", out / "report.html"
+    try:
+        markdown.write_text(to_markdown(TITLE, preamble, sections), encoding="utf-8")
+        write_html(html, TITLE, preamble, sections)
+    except OSError as exc:
+        raise ConfigError(f"--out {out}: {exc.strerror or exc}") from None
+    return Reproduced(markdown, html, tuple(done), seconds)
+
+
+def _preamble(
+    seeds: Sequence[int],
+    only: Sequence[str],
+    done: Sequence[tuple[Section, float]],
+    seconds: float,
+) -> list[Text | Table]:
+    command = f"mapwise reproduce --seeds {','.join(map(str, seeds))}"
+    if tuple(only) != SECTION_KEYS:
+        command += f" --only {','.join(only)}"
+    return [
+        Text(
+            f"Generated by `{command}` in {seconds:.1f} s. Every number of ours is computed "
+            "live from the registered estimators on the scenario catalog; the papers' numbers "
+            "are the constants of `app/reproduce/paper_values.py`, each with its table or "
+            "figure. Interactive figures are in `report.html` (works offline)."
+        ),
+        Table(
+            "Summary",
+            ["Section", "Verdict", "Run time [s]"],
+            [[s.title, s.verdict, f"{t:.1f}"] for s, t in done],
+        ),
+    ]
