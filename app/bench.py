@@ -6,6 +6,10 @@
 * The full KF against FilterPy's ``KalmanFilter`` on the same problem, checking both give the
   same map.
 * How far the SSKF product gain (SKF (15)) is from the exact 2-D steady-state Riccati gain.
+* The observers over a whole cycle: the LPV observer on ``maf-whtc`` (with its LMI gain
+  design timed apart) and the three EKF variants on ``maf-1d-whtc``.
+
+``sections`` (``mapwise bench --section NAME``, repeatable) runs only some of these.
 
 Throughput is the best of several repeats after a warm-up (numba compiled), one core.
 Benchmarks report speed; correctness is the test suite's job (the same-map check here only
@@ -17,11 +21,12 @@ from __future__ import annotations
 import math
 import platform
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 
+from estimation.errors import ConfigError
 from estimation.estimator import get_spec
 from estimation.filters.functions import run_chunk
 from estimation.filters.settings import grid_of, resolve_settings
@@ -33,6 +38,7 @@ FILTERS = ("sskf", "skf", "kf", "rls", "nlms")
 NOX_SPEED_RPM = [750, 780, 1000, 1250, 1500, 1750, 2000, 2500, 3000, 3500, 4000, 4500]
 NOX_FUEL_MG = [0, 5, 10, 15, 20, 25, 30, 34, 38, 42, 46, 50, 55, 60, 65, 70, 75, 80]
 TARGET_SECONDS = 0.25  # wall time per measurement
+SECTIONS = ("sweep", "nox", "filterpy", "sskf-gain", "simulators", "estimators", "observers")
 
 
 DRIVE_STEP = 0.004  # operating-point step per sample, fraction of the axis range (σ)
@@ -292,75 +298,183 @@ def estimators_on_scenarios(quick: bool) -> dict[str, dict[str, float]]:
     return out
 
 
+def observers_on_scenarios(quick: bool) -> dict[str, dict[str, float]]:
+    """The observers over a whole cycle (seed 0): LPV (LPV (26)) on ``maf-whtc``, the EKF
+    variants (EKF §5.1) on ``maf-1d-whtc``.
+
+    ``kernel_samples_per_s`` is the compiled observer alone from the initial state over the
+    whole log (:func:`lpv_run`, :func:`ekf_run`); ``fit_s`` the end-to-end ``fit`` (prepare,
+    LMI gain design or initial settling, kernel, snapshot) in seconds; for LPV ``design_s``
+    is the LMI gain synthesis alone (cvxpy + Clarabel, LPV (28)/(35)). Best of 3 after a
+    warm-up; ``quick`` uses the first 300 s.
+    """
+    from estimation.observers.ekf import ekf_run
+    from estimation.observers.lpv import lpv_run
+    from estimation.scenarios import get_scenario
+
+    duration = 300.0 if quick else None
+    out: dict[str, dict[str, float]] = {}
+
+    scenario = get_scenario("maf-whtc")
+    signals = scenario.build(seed=0, duration_s=duration).signals
+    lpv = get_spec("lpv").build(scenario.default_config("lpv"))
+    prepared = lpv.prepare(signals)
+    start = lpv.initial_state(signals, prepared)  # type: ignore[union-attr]
+    n = len(signals)
+
+    def lpv_kernel() -> object:
+        return lpv_run(
+            start, prepared, 0, n, gamma=lpv.config.gamma, adaptation=lpv.config.adaptation
+        )
+
+    fit_rate = _best_rate(lambda: lpv.fit(signals), n)
+    out["lpv on maf-whtc"] = {
+        "samples": n,
+        "kernel_samples_per_s": _best_rate(lpv_kernel, n),
+        "fit_samples_per_s": fit_rate,
+        "fit_s": n / fit_rate,
+        "design_s": _best_time(lambda: lpv.design_gain(signals)),
+    }
+
+    scenario = get_scenario("maf-1d-whtc")
+    signals = scenario.build(seed=0, duration_s=duration).signals
+    n = len(signals)
+    for name in ("ekf-def", "ekf-aug", "ekf-map"):
+        ekf = get_spec(name).build(scenario.default_config(name))
+        model = ekf.prepare(signals)
+        state = ekf.initial_state(model)  # type: ignore[union-attr]
+
+        def ekf_kernel(e: Any = ekf, m: Any = model, s0: Any = state) -> object:
+            return ekf_run(s0, m, e.settings, n)
+
+        fit_rate = _best_rate(lambda e=ekf: e.fit(signals), n)
+        out[f"{name} on maf-1d-whtc"] = {
+            "samples": n,
+            "kernel_samples_per_s": _best_rate(ekf_kernel, n),
+            "fit_samples_per_s": fit_rate,
+            "fit_s": n / fit_rate,
+        }
+    return out
+
+
+def _best_time(run: Callable[[], object], repeats: int = 3) -> float:
+    run()  # warm-up
+    return min(_timed(run) for _ in range(repeats))
+
+
 def _timed(run: Callable[[], object]) -> float:
     t0 = time.perf_counter()
     run()
     return time.perf_counter() - t0
 
 
-def run_benchmarks(*, quick: bool = False) -> dict[str, Any]:
-    sizes = [2, 4, 8, 12, 16] if quick else list(range(2, 22))
-    rows = sweep(sizes, quick)
-    skf = {r["n"]: r["samples_per_s"]["skf"] for r in rows}
-    return {
-        "machine": {"python": platform.python_version(), "cpu": platform.processor() or ""},
-        "sweep": rows,
-        "skf_flatness": {
+def run_benchmarks(*, quick: bool = False, sections: Sequence[str] | None = None) -> dict[str, Any]:
+    """Every section of :data:`SECTIONS`, or only those named in ``sections``."""
+    chosen = set(SECTIONS if sections is None else sections)
+    unknown = sorted(chosen - set(SECTIONS))
+    if unknown:
+        raise ConfigError(f"unknown bench section(s) {unknown}; choose from {list(SECTIONS)}")
+    report: dict[str, Any] = {
+        "machine": {"python": platform.python_version(), "cpu": platform.processor() or ""}
+    }
+    if "sweep" in chosen:
+        sizes = [2, 4, 8, 12, 16] if quick else list(range(2, 22))
+        rows = sweep(sizes, quick)
+        skf = {r["n"]: r["samples_per_s"]["skf"] for r in rows}
+        report["sweep"] = rows
+        report["skf_flatness"] = {
             "largest_over_smallest_time": skf[min(skf)] / skf[max(skf)],
             "sizes": [min(skf), max(skf)],
-        },
-        "nox_12x18": nox_table(quick),
-        "filterpy": filterpy_comparison(16, 60 if quick else 300),
-        "sskf_product_vs_exact_gain": sskf_gain_gap(),
-        "simulators": simulators(),
-        "estimators": estimators_on_scenarios(quick),
-    }
+        }
+    if "nox" in chosen:
+        report["nox_12x18"] = nox_table(quick)
+    if "filterpy" in chosen:
+        report["filterpy"] = filterpy_comparison(16, 60 if quick else 300)
+    if "sskf-gain" in chosen:
+        report["sskf_product_vs_exact_gain"] = sskf_gain_gap()
+    if "simulators" in chosen:
+        report["simulators"] = simulators()
+    if "estimators" in chosen:
+        report["estimators"] = estimators_on_scenarios(quick)
+    if "observers" in chosen:
+        report["observers"] = observers_on_scenarios(quick)
+    return report
 
 
 def format_report(report: dict[str, Any]) -> str:
-    lines = ["Map filters, samples/s (kernel, one core) and time relative to SSKF", ""]
-    head = f"{'n':>3} {'p':>4} " + "".join(f"{f:>12}" for f in FILTERS)
-    lines += [head + "   SKF/SSKF  KF/SSKF (paper KF)  cell changes"]
-    for row in report["sweep"]:
-        rates = "".join(f"{row['samples_per_s'][f]:>12.3g}" for f in FILTERS)
-        rel = row["relative_time"]
+    """The report as text; sections not in ``report`` are left out."""
+    lines: list[str] = []
+    if "sweep" in report:
+        lines += ["Map filters, samples/s (kernel, one core) and time relative to SSKF", ""]
+        head = f"{'n':>3} {'p':>4} " + "".join(f"{f:>12}" for f in FILTERS)
+        lines += [head + "   SKF/SSKF  KF/SSKF (paper KF)  cell changes"]
+        for row in report["sweep"]:
+            rates = "".join(f"{row['samples_per_s'][f]:>12.3g}" for f in FILTERS)
+            rel = row["relative_time"]
+            lines.append(
+                f"{row['n']:>3} {row['p']:>4} {rates}   {rel['skf']:>8.2f} {rel['kf']:>8.1f} "
+                f"({row['paper_relative_time']['kf']:>5.1f})  {row['cell_change_rate']:>11.1%}"
+            )
+        flat = report["skf_flatness"]
+        lines += [
+            "",
+            f"SKF time {flat['sizes'][1]}x{flat['sizes'][1]} / {flat['sizes'][0]}x"
+            f"{flat['sizes'][0]}: {flat['largest_over_smallest_time']:.2f}",
+        ]
+    if "nox_12x18" in report:
+        lines += _gap(lines)
         lines.append(
-            f"{row['n']:>3} {row['p']:>4} {rates}   {rel['skf']:>8.2f} {rel['kf']:>8.1f} "
-            f"({row['paper_relative_time']['kf']:>5.1f})  {row['cell_change_rate']:>11.1%}"
+            "12x18 NOx table        kernel samples/s   end-to-end samples/s   cell changes"
         )
-    flat = report["skf_flatness"]
-    lines += [
-        "",
-        f"SKF time {flat['sizes'][1]}x{flat['sizes'][1]} / {flat['sizes'][0]}x"
-        f"{flat['sizes'][0]}: {flat['largest_over_smallest_time']:.2f}",
-        "",
-        "12x18 NOx table        kernel samples/s   end-to-end samples/s   cell changes",
-    ]
-    for name, rate in report["nox_12x18"]["filters"].items():
+        for name, rate in report["nox_12x18"]["filters"].items():
+            lines.append(
+                f"  {name:<20} {rate['kernel_samples_per_s']:>14.3g} "
+                f"{rate['end_to_end_samples_per_s']:>22.3g} {rate['cell_change_rate']:>14.1%}"
+            )
+    if "filterpy" in report:
+        fp = report["filterpy"]
+        lines += _gap(lines)
+        if fp["available"]:
+            lines.append(
+                f"Full KF {fp['n']}x{fp['n']} (p={fp['p']}): mapwise "
+                f"{fp['mapwise_samples_per_s']:.3g} samples/s, FilterPy "
+                f"{fp['filterpy_samples_per_s']:.3g} samples/s, "
+                f"speed-up {fp['speedup']:.0f}x, same map: {fp['same_map']} "
+                f"(max |Δθ| {fp['max_abs_map_difference']:.1e})"
+            )
+        else:
+            lines.append(f"FilterPy comparison skipped: {fp['note']}")
+    if "sskf_product_vs_exact_gain" in report:
+        gap = report["sskf_product_vs_exact_gain"]
+        lines += [] if "filterpy" in report else _gap(lines)
         lines.append(
-            f"  {name:<20} {rate['kernel_samples_per_s']:>14.3g} "
-            f"{rate['end_to_end_samples_per_s']:>22.3g} {rate['cell_change_rate']:>14.1%}"
+            f"SSKF product gain vs exact 2-D Riccati gain (r = {gap['r']:g}): max |ΔK| "
+            f"{gap['max_abs_gain_difference']:.3f} at η = {gap['at_eta']}"
         )
-    fp = report["filterpy"]
-    lines.append("")
-    if fp["available"]:
-        lines.append(
-            f"Full KF {fp['n']}x{fp['n']} (p={fp['p']}): mapwise {fp['mapwise_samples_per_s']:.3g}"
-            f" samples/s, FilterPy {fp['filterpy_samples_per_s']:.3g} samples/s, "
-            f"speed-up {fp['speedup']:.0f}x, same map: {fp['same_map']} "
-            f"(max |Δθ| {fp['max_abs_map_difference']:.1e})"
-        )
-    else:
-        lines.append(f"FilterPy comparison skipped: {fp['note']}")
-    gap = report["sskf_product_vs_exact_gain"]
-    lines.append(
-        f"SSKF product gain vs exact 2-D Riccati gain (r = {gap['r']:g}): max |ΔK| "
-        f"{gap['max_abs_gain_difference']:.3f} at η = {gap['at_eta']}"
-    )
-    lines += ["", "Estimators on scenarios (end to end, samples/s)"]
-    for name, rate in report["estimators"].items():
-        lines.append(f"  {name:<48} {rate['samples_per_s']:>10.3g}")
-    lines += ["", "Ground-truth simulators (wall time, compiled)"]
-    for name, sim in report["simulators"].items():
-        lines.append(f"  {name:<48} {sim['wall_s']:>7.3f} s")
+    if "estimators" in report:
+        lines += [*_gap(lines), "Estimators on scenarios (end to end, samples/s)"]
+        for name, rate in report["estimators"].items():
+            lines.append(f"  {name:<48} {rate['samples_per_s']:>10.3g}")
+    if "observers" in report:
+        lines += [
+            *_gap(lines),
+            "Observers, whole log (samples)           kernel samples/s   fit samples/s    fit s"
+            "   gain design s",
+        ]
+        for name, rate in report["observers"].items():
+            design = f"{rate['design_s']:>16.3f}" if "design_s" in rate else f"{'-':>16}"
+            label = f"{name} ({rate['samples']:.0f})"
+            lines.append(
+                f"  {label:<37} {rate['kernel_samples_per_s']:>17.3g} "
+                f"{rate['fit_samples_per_s']:>15.3g} {rate['fit_s']:>8.3f}{design}"
+            )
+    if "simulators" in report:
+        lines += [*_gap(lines), "Ground-truth simulators (wall time, compiled)"]
+        for name, sim in report["simulators"].items():
+            lines.append(f"  {name:<48} {sim['wall_s']:>7.3f} s")
     return "\n".join(lines)
+
+
+def _gap(lines: list[str]) -> list[str]:
+    """A blank line between sections (none before the first)."""
+    return [""] if lines else []

@@ -13,6 +13,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
+from app.cli_service import ServiceCliError
 from estimation.errors import EstimationError
 
 EXIT_USAGE = 2
@@ -113,13 +114,19 @@ def _bench_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--json", action="store_true", help="print the results as JSON")
     p.add_argument("--quick", action="store_true", help="fewer sizes and samples (smoke run)")
+    p.add_argument(
+        "--section",
+        action="append",
+        choices=["sweep", "nox", "filterpy", "sskf-gain", "simulators", "estimators", "observers"],
+        help="run only this section (repeatable; default: all)",
+    )
     p.set_defaults(handler=_cmd_bench)
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
     from app.bench import format_report, run_benchmarks
 
-    report = run_benchmarks(quick=args.quick)
+    report = run_benchmarks(quick=args.quick, sections=args.section)
     print(json.dumps(report, indent=1) if args.json else format_report(report))
     return 0
 
@@ -267,6 +274,9 @@ def build_parser() -> argparse.ArgumentParser:
     _simulate_parser(sub)
     _bench_parser(sub)
     _reproduce_parser(sub)
+    from app.cli_service import add_parsers as _service_parsers
+
+    _service_parsers(sub)
     return parser
 
 
@@ -274,7 +284,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         args = build_parser().parse_args(argv)
         return int(args.handler(args))
-    except (UsageError, EstimationError) as exc:
+    except (UsageError, EstimationError, ServiceCliError) as exc:
         message = " ".join(str(exc).split())
         print(f"mapwise: error: {message}", file=sys.stderr)
         return EXIT_USAGE

@@ -210,7 +210,7 @@ def _nox(name: str, cycle: str, description: str, duration_s: float) -> Scenario
 
         # SKF (34): σv = 25, σw = 15, σf = 50 ppm, a = 0.96, τ = 0.75 s at 50 Hz; T_NOx,0 = 0.
         sensor = {"lag": 0.96, "delay_s": 0.75, "sigma_f": 50.0}
-        return table_filter_config(
+        config = table_filter_config(
             estimator,
             nox_base_map(),
             "nox_ppm",
@@ -220,6 +220,18 @@ def _nox(name: str, cycle: str, description: str, duration_s: float) -> Scenario
             p0=1.0e4,
             sensor=sensor,
         )
+        if estimator == "rls" and config is not None:
+            # The papers give no RLS calibration. RLS with forgetting winds up where the
+            # regressor stays constant: in the directions of the active block the data do not
+            # see, P grows as λ^-k. On the NEDC at 50 Hz 69 % of the samples sit on an exactly
+            # constant regressor (idle, cruises of up to 3451 samples), so with λ = 0.995
+            # P reached P0·λ^-3451 ≈ 3e10 and noise drove cells to ±25 000 ppm (map error
+            # 1763–6855 %, seeds 0–2). Hence a 20 s memory, 1/(1−λ) = 1000 samples, and the
+            # covariance limit at P0 (EKF §4, ALGORITHMS.md §2.5) so no dwell can wind it up;
+            # P0 = 1000 is normalised by σv², a prior σ of √1000·25 ≈ 790 ppm.
+            # See tests/estimation/test_rls_windup.py.
+            config |= {"forgetting": 0.999, "p0": 1000.0, "limit": "p0"}
+        return config
 
     return Scenario(
         name=name,
