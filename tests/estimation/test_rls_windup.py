@@ -33,9 +33,9 @@ def test_scenario_rls_settings_keep_the_map_bounded(nedc) -> None:  # type: igno
     assert config["limit"] == "p0"
     assert 1.0 / (1.0 - config["forgetting"]) == pytest.approx(1000.0)
     ours = execute_scenario("nox-nedc", "rls", seed=0, data=nedc).result["metrics"]
-    wound = execute_scenario(
-        "nox-nedc", "rls", seed=0, data=nedc, overrides=WOUND_UP
-    ).result["metrics"]
+    wound = execute_scenario("nox-nedc", "rls", seed=0, data=nedc, overrides=WOUND_UP).result[
+        "metrics"
+    ]
     assert ours["mean_relative_error"] < 0.3
     assert wound["mean_relative_error"] > 10 * ours["mean_relative_error"]
     assert wound["max_abs_error"] > 5000.0  # ppm: cells driven far outside any NOx value

@@ -1,0 +1,177 @@
+"""The app factory: ``create_app(settings)``.
+
+Start-up checks the database schema (an empty database gets the schema; an out-of-date one
+is refused, naming ``mapwise db upgrade``), starts the run executor (whose sweep marks runs
+left ``running`` as ``interrupted``) and the live hub. The event loop only moves bytes:
+endpoints touching the database or the numerics are plain functions run in the thread pool.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from typing import Any
+
+from fastapi import Depends, FastAPI
+from fastapi.middleware.cors import CORSMiddleware
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+from app.api.deps import Services, require_token
+from app.api.routers import base_maps, catalog, datasets, frontend, runs, stream
+from app.config import Settings, get_settings
+from app.db.engine import Database
+from app.db.migrate import check_schema, upgrade
+from app.errors import PayloadTooLargeError, install_error_handlers
+from app.runs.executor import RunExecutor
+from app.runs.hub import LiveHub
+from app.services.base_maps import BaseMapService
+from app.services.datasets import DatasetService
+from app.services.runs import RunService
+from app.services.tokens import TokenService
+
+MULTIPART_OVERHEAD = 1 << 20  # form fields and boundaries around the file
+
+
+class SchemaError(RuntimeError):
+    """The database schema is not the one this code needs."""
+
+
+def prepare_database(settings: Settings) -> str:
+    """Create the schema on an empty database; refuse an out-of-date or unknown one."""
+    check = check_schema(settings.database_url)
+    if check.state == "empty":
+        upgrade(settings.database_url)
+        return check.head
+    if check.state != "current":
+        raise SchemaError(check.message)
+    return check.head
+
+
+def create_app(settings: Settings | None = None, *, execute_runs: bool = True) -> FastAPI:
+    settings = settings or get_settings()
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        revision = await asyncio.to_thread(prepare_database, settings)
+        db = Database(settings.database_url)
+        hub = LiveHub()
+        executor = RunExecutor(settings, db, hub) if execute_runs else None
+        app.state.services = Services(
+            settings=settings,
+            db=db,
+            hub=hub,
+            executor=executor,
+            datasets=DatasetService(db),
+            runs=RunService(db, settings, executor),
+            base_maps=BaseMapService(db),
+            tokens=TokenService(db),
+            revision=revision,
+        )
+        if executor is not None:
+            # In the loop's own thread: the workers' parent-death signal is tied to the
+            # thread that spawns them, and this one lives as long as the server.
+            executor.start(asyncio.get_running_loop())
+        try:
+            yield
+        finally:
+            if executor is not None:
+                await asyncio.to_thread(executor.shutdown)
+            db.dispose()
+
+    app = FastAPI(
+        title="mapwise",
+        summary="Online adaptation of engine look-up tables: runs, live maps, exports.",
+        version=_version(),
+        lifespan=lifespan,
+    )
+    app.state.settings = settings
+    install_error_handlers(app)
+    api = [Depends(require_token)]
+    app.include_router(catalog.open_router, prefix="/api")
+    for module in (catalog, datasets, runs, base_maps):
+        app.include_router(module.router, prefix="/api", dependencies=api)
+    app.include_router(stream.router, prefix="/api")
+    app.include_router(frontend.router)
+    static = frontend.static_files()
+    if static is not None:
+        app.mount("/static", static, name="static")
+    if settings.cors_origins:
+        app.add_middleware(
+            CORSMiddleware,
+            allow_origins=settings.cors_origins,
+            allow_methods=["GET", "POST", "PATCH", "DELETE"],
+            allow_headers=["Authorization", "Content-Type"],
+        )
+    app.add_middleware(BodyLimit, max_bytes=settings.max_upload_bytes + MULTIPART_OVERHEAD)
+    return app
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("mapwise")
+    except PackageNotFoundError:
+        return "0+unknown"
+
+
+class BodyLimit:
+    """Refuse request bodies over ``max_bytes`` with 413, counting while they stream in
+    (a lying or absent ``Content-Length`` does not help)."""
+
+    def __init__(self, app: ASGIApp, *, max_bytes: int) -> None:
+        self.app = app
+        self.max_bytes = max_bytes
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        error = PayloadTooLargeError(
+            f"the request body exceeds the limit of {self.max_bytes} bytes", field="file"
+        )
+        length = dict(scope.get("headers", [])).get(b"content-length")
+        if length is not None and length.isdigit() and int(length) > self.max_bytes:
+            await _send_error(send, error)
+            return
+        received = 0
+        exceeded = False
+        started = False
+
+        async def limited_receive() -> Message:
+            nonlocal received, exceeded
+            if exceeded:
+                return {"type": "http.disconnect"}
+            message = await receive()
+            if message["type"] == "http.request":
+                received += len(message.get("body", b""))
+                if received > self.max_bytes:
+                    exceeded = True
+                    return {"type": "http.request", "body": b"", "more_body": False}
+            return message
+
+        async def guarded_send(message: Message) -> None:
+            nonlocal started
+            if exceeded:
+                if message["type"] == "http.response.start" and not started:
+                    started = True
+                    await _send_error(send, error)
+                return
+            started = started or message["type"] == "http.response.start"
+            await send(message)
+
+        await self.app(scope, limited_receive, guarded_send)
+
+
+async def _send_error(send: Send, error: PayloadTooLargeError) -> None:
+    import json
+
+    body = json.dumps(error.body()).encode()
+    headers: list[Any] = [
+        (b"content-type", b"application/json"),
+        (b"content-length", str(len(body)).encode()),
+        (b"connection", b"close"),
+    ]
+    await send({"type": "http.response.start", "status": error.status, "headers": headers})
+    await send({"type": "http.response.body", "body": body})

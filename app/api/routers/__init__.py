@@ -1,0 +1,1 @@
+"""HTTP routers: HTTP only, every decision is a service's."""

@@ -1,0 +1,97 @@
+"""Datasets: upload (multipart), simulate, list, get, preview, delete."""
+
+from __future__ import annotations
+
+import json
+from typing import Annotated
+
+from fastapi import APIRouter, File, Form, Query, Response, UploadFile
+
+from app.api.deps import MAX_ID, Id, ServicesDep
+from app.api.schemas import ERRORS, DatasetOut, PageOut, PreviewChannel, PreviewOut, SimulateIn
+from app.errors import InvalidRequestError
+
+router = APIRouter(prefix="/datasets", tags=["datasets"], responses=ERRORS)
+
+Limit = Annotated[int, Query(ge=1, le=500)]
+Offset = Annotated[int, Query(ge=0, le=MAX_ID)]
+
+
+def _units(raw: str | None) -> dict[str, str] | None:
+    if raw is None or not raw.strip():
+        return None
+    try:
+        units = json.loads(raw)
+    except json.JSONDecodeError as exc:
+        raise InvalidRequestError(f"units must be a JSON object: {exc.msg}", field="units") from exc
+    if not isinstance(units, dict) or not all(
+        isinstance(k, str) and isinstance(v, str) for k, v in units.items()
+    ):
+        raise InvalidRequestError(
+            'units must be a JSON object of strings, e.g. {"speed": "rpm"}', field="units"
+        )
+    return units
+
+
+@router.post("", status_code=201, response_model=DatasetOut)
+def upload_dataset(
+    services: ServicesDep,
+    file: Annotated[UploadFile, File(description="CSV, MCAP or MDF4 log (format from content).")],
+    name: Annotated[str | None, Form(max_length=200)] = None,
+    units: Annotated[str | None, Form(description='JSON object {"channel": "unit"}')] = None,
+) -> DatasetOut:
+    """Upload a log. The whole file is validated before anything is stored."""
+    dataset = services.datasets.upload(
+        file.file,
+        filename=file.filename,
+        name=name,
+        units=_units(units),
+        max_bytes=services.settings.max_upload_bytes,
+    )
+    return DatasetOut.of(dataset)
+
+
+@router.post("/simulate", status_code=201, response_model=DatasetOut)
+def simulate_dataset(services: ServicesDep, body: SimulateIn) -> DatasetOut:
+    """A dataset simulated from a scenario; its truth is kept for the run metrics."""
+    dataset = services.datasets.simulate(
+        body.scenario, seed=body.seed, name=body.name, duration_s=body.duration_s
+    )
+    return DatasetOut.of(dataset)
+
+
+@router.get("", response_model=PageOut[DatasetOut])
+def list_datasets(services: ServicesDep, limit: Limit = 50, offset: Offset = 0) -> PageOut:
+    page = services.datasets.list(limit=limit, offset=offset)
+    return PageOut[DatasetOut](
+        items=[DatasetOut.of(d) for d in page.items],
+        total=page.total,
+        limit=page.limit,
+        offset=page.offset,
+    )
+
+
+@router.get("/{dataset_id}", response_model=DatasetOut)
+def get_dataset(services: ServicesDep, dataset_id: Id) -> DatasetOut:
+    return DatasetOut.of(services.datasets.get(dataset_id))
+
+
+@router.get("/{dataset_id}/preview", response_model=PreviewOut)
+def preview_dataset(
+    services: ServicesDep,
+    dataset_id: Id,
+    points: Annotated[int, Query(ge=4, le=20_000)] = 400,
+) -> PreviewOut:
+    """Every channel decimated to at most ``points`` samples, peaks kept."""
+    doc = services.datasets.preview(dataset_id, points=points)
+    return PreviewOut(
+        time=doc["time"],
+        channels={k: PreviewChannel(**v) for k, v in doc["channels"].items()},
+    )
+
+
+@router.delete("/{dataset_id}", status_code=204, response_class=Response)
+def delete_dataset(services: ServicesDep, dataset_id: Id, force: bool = False) -> Response:
+    """Delete a dataset; 409 if runs use it, unless ``force`` (then they go too)."""
+    services.datasets.delete(dataset_id, force=force)
+    return Response(status_code=204)

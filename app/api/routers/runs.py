@@ -1,0 +1,169 @@
+"""Runs: create, list, get, cancel, resume; versions, series, cells, export, compare."""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+from fastapi import APIRouter, Query, Response
+
+from app.api.deps import MAX_ID, Id, ServicesDep
+from app.api.schemas import (
+    ERRORS,
+    AxisOut,
+    CellsOut,
+    CompareItem,
+    CompareOut,
+    LabelIn,
+    PageOut,
+    RunOut,
+    SeriesLine,
+    SeriesOut,
+    VersionListOut,
+    VersionOut,
+    VersionSummaryOut,
+)
+from app.errors import InvalidRequestError
+from app.services.decimate import finite_or_none, nested_or_none
+from app.services.run_plan import RunRequest
+
+router = APIRouter(tags=["runs"], responses=ERRORS)
+
+Limit = Annotated[int, Query(ge=1, le=500)]
+Offset = Annotated[int, Query(ge=0, le=MAX_ID)]
+Status = Literal["queued", "running", "succeeded", "failed", "cancelled", "interrupted"]
+
+
+@router.post("/runs", status_code=201, response_model=RunOut)
+def create_run(services: ServicesDep, body: RunRequest) -> RunOut:
+    """Validate and queue a run. Service keys in ``config``: ``pace``, ``version_every``,
+    ``gates``, ``locked``; the rest is the estimator's config."""
+    return RunOut.of(services.runs.create(body))
+
+
+@router.get("/runs", response_model=PageOut[RunOut])
+def list_runs(
+    services: ServicesDep,
+    limit: Limit = 50,
+    offset: Offset = 0,
+    dataset_id: Annotated[int | None, Query(ge=1, le=MAX_ID)] = None,
+    status: Status | None = None,
+) -> PageOut:
+    page = services.runs.list(limit=limit, offset=offset, dataset_id=dataset_id, status=status)
+    return PageOut[RunOut](
+        items=[RunOut.of(r) for r in page.items],
+        total=page.total,
+        limit=page.limit,
+        offset=page.offset,
+    )
+
+
+@router.get("/runs/{run_id}", response_model=RunOut)
+def get_run(services: ServicesDep, run_id: Id) -> RunOut:
+    return RunOut.of(services.runs.get(run_id))
+
+
+@router.post("/runs/{run_id}/cancel", response_model=RunOut)
+def cancel_run(services: ServicesDep, run_id: Id) -> RunOut:
+    """Cancel a queued or running run (a running run stops at its next chunk)."""
+    return RunOut.of(services.runs.cancel(run_id))
+
+
+@router.post("/runs/{run_id}/resume", response_model=RunOut)
+def resume_run(services: ServicesDep, run_id: Id) -> RunOut:
+    """Continue an interrupted or cancelled run from its last persisted version."""
+    return RunOut.of(services.runs.resume(run_id))
+
+
+@router.get("/runs/{run_id}/versions", response_model=VersionListOut)
+def list_versions(services: ServicesDep, run_id: Id) -> VersionListOut:
+    return VersionListOut(items=[VersionSummaryOut.of(v) for v in services.runs.versions(run_id)])
+
+
+@router.get("/runs/{run_id}/versions/{version_id}", response_model=VersionOut)
+def get_version(services: ServicesDep, run_id: Id, version_id: Id) -> VersionOut:
+    return VersionOut.of_version(services.runs.version(run_id, version_id))
+
+
+@router.patch("/runs/{run_id}/versions/{version_id}", response_model=VersionSummaryOut)
+def label_version(
+    services: ServicesDep, run_id: Id, version_id: Id, body: LabelIn
+) -> VersionSummaryOut:
+    return VersionSummaryOut.of(services.runs.label(run_id, version_id, body.label))
+
+
+@router.get("/runs/{run_id}/series", response_model=SeriesOut)
+def get_series(
+    services: ServicesDep,
+    run_id: Id,
+    points: Annotated[int, Query(ge=2, le=100_000)] = 2000,
+) -> SeriesOut:
+    """The run's result series on a shared time base (stored at the end of the run)."""
+    time, lines = services.runs.series(run_id, points=points)
+    return SeriesOut(
+        time=finite_or_none(time),
+        series={x.name: SeriesLine(unit=x.unit, values=finite_or_none(x.values)) for x in lines},
+    )
+
+
+@router.get("/runs/{run_id}/cells", response_model=CellsOut)
+def get_cells(services: ServicesDep, run_id: Id) -> CellsOut:
+    """Per cell: visits (interpolation weight of accepted samples) and rejections by reason."""
+    version = services.runs.cells(run_id)
+    if version is None:
+        return CellsOut(axes=None, visits=None, rejected={})
+    return CellsOut(
+        axes=None if version.axes is None else [AxisOut(**a) for a in version.axes],
+        visits=nested_or_none(version.visits),
+        rejected={k: nested_or_none(v) or [] for k, v in version.cell_rejections.items()},
+    )
+
+
+@router.get(
+    "/runs/{run_id}/export",
+    response_class=Response,
+    responses={
+        200: {
+            "description": "The file",
+            "content": {
+                "application/json": {},
+                "text/csv": {},
+                "application/octet-stream": {},
+                "text/plain": {},
+            },
+        }
+    },
+)
+def export_run(
+    services: ServicesDep,
+    run_id: Id,
+    format: Annotated[Literal["json", "csv", "mcap", "dcm"], Query()] = "json",
+    version: Annotated[int | None, Query(ge=1, le=MAX_ID)] = None,
+    part: Literal["map", "series"] | None = None,
+) -> Response:
+    """Download: ``json`` (the ``mapwise adapt`` map document), ``csv`` (map grid, or
+    ``part=series`` the time series), ``mcap`` (series + map versions), ``dcm``."""
+    download = services.runs.export(run_id, fmt=format, version_id=version, part=part)
+    return Response(
+        download.content,
+        media_type=download.media_type,
+        headers={"Content-Disposition": f'attachment; filename="{download.filename}"'},
+    )
+
+
+@router.get("/compare", response_model=CompareOut)
+def compare_runs(services: ServicesDep, runs: Annotated[str, Query(max_length=2000)]) -> CompareOut:
+    """Several runs side by side, each with its final (or latest) map version."""
+    try:
+        ids = [int(x) for x in runs.split(",") if x.strip()]
+    except ValueError:
+        raise InvalidRequestError("runs must be comma-separated run ids", field="runs") from None
+    if not all(1 <= i <= MAX_ID for i in ids):
+        raise InvalidRequestError(f"run ids are 1..{MAX_ID}", field="runs")
+    if len(ids) > 20:
+        raise InvalidRequestError("compare at most 20 runs", field="runs")
+    items = []
+    for run, version in services.runs.compare(ids):
+        doc = RunOut.of(run).model_dump()
+        final = None if version is None else VersionOut.of_version(version)
+        items.append(CompareItem(**doc, final_version=final))
+    return CompareOut(runs=items)

@@ -1,0 +1,165 @@
+"""``WS /api/runs/{id}/stream``: a full frame, then deltas (≤ live_fps per second) and
+status changes. A viewer that falls behind gets a fresh full frame instead of the deltas it
+missed; a finished run sends its final full frame and its status, and the socket stays open
+(a resumed run streams again)."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from typing import Any
+
+from fastapi import APIRouter, WebSocket, WebSocketDisconnect
+from starlette.concurrency import run_in_threadpool
+
+from app.api.deps import Services, check_token, get_services
+from app.api.schemas import RunOut
+from app.domain import FINISHED, MapVersion, Run, Series
+from app.errors import AppError
+from app.runs.hub import LiveState
+from app.services.decimate import finite_or_none, nested_or_none
+
+router = APIRouter(tags=["live"])
+
+CLOSE_POLICY = 1008
+CLOSE_NOT_FOUND = 4404
+
+
+def _db_parts(services: Services, run_id: int) -> tuple[Run, MapVersion | None, list[Series]]:
+    run = services.runs.get(run_id)
+    version = services.runs.latest_version(run_id)
+    _, lines = services.runs.series(run_id, points=services.settings.series_points)
+    return run, version, lines
+
+
+def _full_from_db(run: Run, version: MapVersion | None, lines: list[Series]) -> dict[str, Any]:
+    series = {
+        x.name: {"unit": x.unit, "time": finite_or_none(x.time), "values": finite_or_none(x.values)}
+        for x in lines
+    }
+    axes = None if version is None else version.axes
+    trajectory: dict[str, Any] = {"time": [], "points": []}
+    if axes and all(a["name"] in series for a in axes):
+        cols = [series[a["name"]]["values"] for a in axes]
+        trajectory = {
+            "time": series[axes[0]["name"]]["time"],
+            "points": [list(p) for p in zip(*cols, strict=True)],
+        }
+    return {
+        "type": "full",
+        "run": RunOut.of(run).model_dump(mode="json"),
+        "axes": axes,
+        "values": None if version is None else nested_or_none(version.values),
+        "variances": None if version is None else nested_or_none(version.variances),
+        "visits": None if version is None else nested_or_none(version.visits),
+        "active_cell": None,
+        "trajectory": trajectory,
+        "series": series,
+        "metrics": dict(run.metrics),
+        "rejected": dict(run.rejected),
+        "sample": run.sample,
+        "n_samples": run.n_samples,
+    }
+
+
+def _full_from_live(run: Run, live: LiveState) -> dict[str, Any]:
+    doc = RunOut.of(run).model_dump(mode="json")
+    doc |= {"status": live.status, "progress": live.progress, "sample": live.sample}
+    return {
+        "type": "full",
+        "run": doc,
+        "axes": live.axes,
+        "values": live.values,
+        "variances": live.variances,
+        "visits": live.visits,
+        "active_cell": live.active_cell,
+        "trajectory": {"time": list(live.trajectory_time), "points": list(live.trajectory_points)},
+        "series": {
+            name: {
+                "unit": live.units.get(name, ""),
+                "time": list(s["time"]),
+                "values": list(s["values"]),
+            }
+            for name, s in live.series.items()
+        },
+        "metrics": dict(live.metrics or {}),
+        "rejected": dict(live.rejected or {}),
+        "sample": live.sample,
+        "n_samples": live.n_samples,
+    }
+
+
+async def _full(services: Services, run_id: int) -> tuple[dict[str, Any], str]:
+    """A full frame and the run's status; live state when executing, else the database."""
+    run, version, lines = await run_in_threadpool(_db_parts, services, run_id)
+    live = services.hub.state(run_id)  # read after the await: the freshest live state
+    if live is not None and run.status not in FINISHED:
+        return _full_from_live(run, live), live.status
+    return _full_from_db(run, version, lines), run.status
+
+
+def _status_message(frame: dict[str, Any]) -> dict[str, Any]:
+    run = frame["run"]
+    return {
+        "type": "status",
+        "status": run["status"],
+        "error": run["error"],
+        "progress": run["progress"],
+    }
+
+
+@router.websocket("/runs/{run_id}/stream")
+async def stream_run(websocket: WebSocket, run_id: int) -> None:
+    services = get_services(websocket)
+    try:
+        await run_in_threadpool(check_token, services, websocket.query_params.get("token"))
+    except AppError as exc:
+        await websocket.close(code=CLOSE_POLICY, reason=exc.message[:120])
+        return
+    await websocket.accept()
+    viewer = services.hub.subscribe(run_id)
+    try:
+        try:
+            frame, status = await _full(services, run_id)
+        except AppError as exc:
+            await websocket.send_json({"type": "error", "error": exc.body()["error"]})
+            await websocket.close(code=CLOSE_NOT_FOUND)
+            return
+        viewer.reset()
+        await websocket.send_json(frame)
+        if status in FINISHED:
+            await websocket.send_json(_status_message(frame))
+        receiver = asyncio.create_task(_drain_client(websocket))
+        sender = asyncio.create_task(_send_loop(websocket, services, viewer, run_id))
+        _done, pending = await asyncio.wait({receiver, sender}, return_when=asyncio.FIRST_COMPLETED)
+        for task in pending:
+            task.cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await task
+    except WebSocketDisconnect:
+        pass
+    finally:
+        services.hub.unsubscribe(viewer)
+
+
+async def _drain_client(websocket: WebSocket) -> None:
+    """Read (and ignore) what the client sends, until it goes away."""
+    with contextlib.suppress(WebSocketDisconnect):
+        while True:
+            message = await websocket.receive()
+            if message["type"] == "websocket.disconnect":
+                return
+
+
+async def _send_loop(websocket: WebSocket, services: Services, viewer: Any, run_id: int) -> None:
+    with contextlib.suppress(WebSocketDisconnect, RuntimeError):
+        while True:
+            message = await viewer.next()
+            if message is None:
+                frame, status = await _full(services, run_id)
+                viewer.reset()  # deltas queued meanwhile are already in the frame
+                await websocket.send_json(frame)
+                if status in FINISHED:
+                    await websocket.send_json(_status_message(frame))
+                continue
+            await websocket.send_text(message)

@@ -1,0 +1,295 @@
+"""Response and request bodies of the HTTP API (what OpenAPI documents).
+
+Routers build these from domain objects; arrays are nested lists with ``null`` for NaN.
+"""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Any, Generic, Literal, TypeVar
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from app.domain import BaseMap, Dataset, MapVersion, Run, VersionSummary
+from app.services.decimate import nested_or_none
+
+T = TypeVar("T")
+
+Nested = list[Any]
+
+
+class ErrorBody(BaseModel):
+    code: str = Field(description="validation_error, not_found, conflict, payload_too_large, …")
+    message: str
+    field: str | None = Field(description="The offending field, column or channel.")
+
+
+class ErrorOut(BaseModel):
+    error: ErrorBody
+
+
+ERRORS: dict[int | str, dict[str, Any]] = {
+    code: {"model": ErrorOut} for code in (400, 401, 404, 405, 409, 413, 415, 422)
+}
+
+
+class PageOut(BaseModel, Generic[T]):
+    items: list[T]
+    total: int
+    limit: int
+    offset: int
+
+
+class HealthOut(BaseModel):
+    status: Literal["ok"]
+    database: Literal["sqlite", "postgresql"]
+    revision: str | None
+    version: str
+    auth_required: bool
+    workers: int
+
+
+class ChannelOut(BaseModel):
+    name: str
+    unit: str
+
+
+class DatasetOut(BaseModel):
+    id: int
+    name: str
+    source: str
+    rows: int
+    rate_hz: float
+    duration_s: float
+    channels: list[ChannelOut]
+    time_column: str
+    has_truth: bool
+    scenario: str | None
+    seed: int | None
+    created_at: datetime
+
+    @classmethod
+    def of(cls, d: Dataset) -> DatasetOut:
+        return cls(
+            id=d.id,
+            name=d.name,
+            source=d.source,
+            rows=d.rows,
+            rate_hz=d.rate_hz,
+            duration_s=d.duration_s,
+            channels=[ChannelOut(name=c.name, unit=c.unit) for c in d.channels],
+            time_column=d.time_column,
+            has_truth=d.has_truth,
+            scenario=d.scenario,
+            seed=d.seed,
+            created_at=d.created_at,
+        )
+
+
+class SimulateIn(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    scenario: str = Field(min_length=1)
+    seed: int = Field(0, ge=0, le=2**31 - 1)
+    name: str | None = Field(None, max_length=200)
+    duration_s: float | None = Field(None, gt=0, description="Simulate only the first S s.")
+
+
+class PreviewChannel(BaseModel):
+    unit: str
+    values: list[float | None]
+
+
+class PreviewOut(BaseModel):
+    time: list[float | None]
+    channels: dict[str, PreviewChannel]
+
+
+class RunOut(BaseModel):
+    id: int
+    dataset_id: int
+    estimator: str
+    name: str
+    status: Literal["queued", "running", "succeeded", "failed", "cancelled", "interrupted"]
+    progress: float
+    sample: int
+    n_samples: int
+    error: str | None
+    signals: dict[str, str]
+    table: dict[str, Any] | None
+    config: dict[str, Any]
+    estimator_config: dict[str, Any]
+    produces_map: bool
+    created_at: datetime
+    started_at: datetime | None
+    finished_at: datetime | None
+    metrics: dict[str, float | None]
+    rejected: dict[str, int]
+    n_versions: int
+    base_map_id: int | None
+
+    @classmethod
+    def of(cls, r: Run) -> RunOut:
+        return cls(
+            id=r.id,
+            dataset_id=r.dataset_id,
+            estimator=r.estimator,
+            name=r.name,
+            status=r.status,  # type: ignore[arg-type]
+            progress=r.progress,
+            sample=r.sample,
+            n_samples=r.n_samples,
+            error=r.error,
+            signals=r.signals,
+            table=r.table,
+            config=r.config,
+            estimator_config=r.estimator_config,
+            produces_map=r.produces_map,
+            created_at=r.created_at,
+            started_at=r.started_at,
+            finished_at=r.finished_at,
+            metrics=r.metrics,
+            rejected=r.rejected,
+            n_versions=r.n_versions,
+            base_map_id=r.base_map_id,
+        )
+
+
+class VersionSummaryOut(BaseModel):
+    id: int
+    run_id: int
+    step: int
+    time_s: float
+    label: str | None
+    final: bool
+    created_at: datetime
+
+    @classmethod
+    def of(cls, v: VersionSummary) -> VersionSummaryOut:
+        return cls(
+            id=v.id,
+            run_id=v.run_id,
+            step=v.step,
+            time_s=v.time_s,
+            label=v.label,
+            final=v.final,
+            created_at=v.created_at,
+        )
+
+
+class VersionListOut(BaseModel):
+    items: list[VersionSummaryOut]
+
+
+class AxisOut(BaseModel):
+    name: str
+    unit: str = ""
+    breakpoints: list[float]
+
+
+class VersionOut(VersionSummaryOut):
+    axes: list[AxisOut] | None
+    values: Nested | None
+    variances: Nested | None
+    visits: Nested | None
+    rejected: dict[str, int]
+
+    @classmethod
+    def of_version(cls, v: MapVersion) -> VersionOut:
+        s = v.summary
+        return cls(
+            id=s.id,
+            run_id=s.run_id,
+            step=s.step,
+            time_s=s.time_s,
+            label=s.label,
+            final=s.final,
+            created_at=s.created_at,
+            axes=None if v.axes is None else [AxisOut(**a) for a in v.axes],
+            values=nested_or_none(v.values),
+            variances=nested_or_none(v.variances),
+            visits=nested_or_none(v.visits),
+            rejected=v.rejected,
+        )
+
+
+class LabelIn(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    label: str | None = Field(max_length=200)
+
+
+class SeriesLine(BaseModel):
+    unit: str
+    values: list[float | None]
+
+
+class SeriesOut(BaseModel):
+    time: list[float | None]
+    series: dict[str, SeriesLine]
+
+
+class CellsOut(BaseModel):
+    axes: list[AxisOut] | None
+    visits: Nested | None
+    rejected: dict[str, Nested]
+
+
+class CompareItem(RunOut):
+    final_version: VersionOut | None
+
+
+class CompareOut(BaseModel):
+    runs: list[CompareItem]
+
+
+class LineageOut(BaseModel):
+    run_id: int | None
+    version_id: int | None
+    dataset_id: int | None
+    estimator: str | None
+    config: dict[str, Any] | None
+    parent_base_map_id: int | None
+    metrics: dict[str, Any]
+
+
+class BaseMapOut(BaseModel):
+    id: int
+    name: str
+    source: str
+    axes: list[AxisOut]
+    values: Nested
+    lineage: LineageOut
+    created_at: datetime
+
+    @classmethod
+    def of(cls, b: BaseMap) -> BaseMapOut:
+        return cls(
+            id=b.id,
+            name=b.name,
+            source=b.source,
+            axes=[AxisOut(**a) for a in b.axes],
+            values=nested_or_none(b.values) or [],
+            lineage=LineageOut(
+                run_id=b.run_id,
+                version_id=b.version_id,
+                dataset_id=b.dataset_id,
+                estimator=b.estimator,
+                config=b.config,
+                parent_base_map_id=b.parent_base_map_id,
+                metrics=b.metrics,
+            ),
+            created_at=b.created_at,
+        )
+
+
+class PromoteIn(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    run_id: int = Field(ge=1, le=2**31 - 1)
+    version_id: int = Field(ge=1, le=2**31 - 1)
+    name: str = Field(min_length=1, max_length=200)
+
+
+class CatalogOut(BaseModel):
+    items: list[dict[str, Any]]

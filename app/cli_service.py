@@ -1,0 +1,223 @@
+"""``mapwise serve``, ``mapwise db upgrade|current`` and ``mapwise token create|list|revoke``.
+
+Every problem (unreachable or out-of-date database, bad settings) is one line on stderr and
+exit code 2, raised as the CLI's usage error.
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from pydantic import ValidationError
+
+from app.config import Settings
+
+
+class ServiceCliError(Exception):
+    """Reported by ``app.cli`` as ``mapwise: error: ...`` with exit code 2."""
+
+
+def _database_arg(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--database-url",
+        help="SQLAlchemy URL (default MAPWISE_DATABASE_URL or sqlite:///./mapwise.db)",
+    )
+
+
+def add_parsers(sub: argparse._SubParsersAction) -> None:
+    serve = sub.add_parser(
+        "serve",
+        help="start the web service and dashboard",
+        description="Start the web service. An empty database gets the schema and a demo "
+        "dataset and run; a database at an older schema revision is refused (back it up and "
+        "run `mapwise db upgrade`). Bearer tokens are required when --host is not loopback "
+        "(or MAPWISE_REQUIRE_AUTH=1).",
+    )
+    serve.add_argument("--host", help="interface (default 127.0.0.1, MAPWISE_HOST)")
+    serve.add_argument("--port", type=int, help="TCP port (default 8000, MAPWISE_PORT)")
+    _database_arg(serve)
+    serve.add_argument("--workers", type=int, help="run worker processes (MAPWISE_RUN_WORKERS)")
+    serve.add_argument("--no-demo", action="store_true", help="do not seed an empty database")
+    serve.add_argument("--log-level", default="info", choices=["debug", "info", "warning"])
+    serve.set_defaults(handler=_cmd_serve)
+
+    db = sub.add_parser("db", help="database schema: upgrade, or show the revision")
+    db_sub = db.add_subparsers(dest="db_command", required=True)
+    upgrade = db_sub.add_parser("upgrade", help="migrate the schema to this version's head")
+    _database_arg(upgrade)
+    upgrade.set_defaults(handler=_cmd_db_upgrade)
+    current = db_sub.add_parser("current", help="show the schema revision and if it is current")
+    _database_arg(current)
+    current.set_defaults(handler=_cmd_db_current)
+
+    token = sub.add_parser("token", help="API bearer tokens: create, list, revoke")
+    token_sub = token.add_subparsers(dest="token_command", required=True)
+    create = token_sub.add_parser("create", help="create a token (its secret is shown once)")
+    create.add_argument("--name", required=True, help="what the token is for")
+    _database_arg(create)
+    create.set_defaults(handler=_cmd_token_create)
+    listing = token_sub.add_parser("list", help="list tokens (never their secrets)")
+    _database_arg(listing)
+    listing.set_defaults(handler=_cmd_token_list)
+    revoke = token_sub.add_parser("revoke", help="revoke a token by id")
+    revoke.add_argument("id", type=int, help="token id (see mapwise token list)")
+    _database_arg(revoke)
+    revoke.set_defaults(handler=_cmd_token_revoke)
+
+
+def _settings(args: argparse.Namespace, **extra: Any) -> Settings:
+    overrides = {"database_url": getattr(args, "database_url", None), **extra}
+    try:
+        return Settings(**{k: v for k, v in overrides.items() if v is not None})
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        where = ".".join(str(p) for p in first["loc"]) or "settings"
+        raise ServiceCliError(f"{where}: {first['msg'].removeprefix('Value error, ')}") from None
+
+
+def _db_error(exc: Exception, url: str) -> ServiceCliError:
+    from sqlalchemy.engine import make_url
+
+    safe = make_url(url).render_as_string(hide_password=True) if "://" in url else url
+    reason = str(getattr(exc, "orig", None) or exc).strip().splitlines()[0]
+    return ServiceCliError(f"cannot use the database {safe}: {reason}")
+
+
+def _cmd_serve(args: argparse.Namespace) -> int:
+    import sys
+
+    import uvicorn
+    from sqlalchemy.exc import SQLAlchemyError
+
+    from app.api import create_app
+    from app.db.migrate import check_schema, upgrade
+
+    settings = _settings(
+        args,
+        host=args.host,
+        port=args.port,
+        run_workers=args.workers,
+        seed_demo=False if args.no_demo else None,
+    )
+    try:
+        check = check_schema(settings.database_url)
+        if check.state == "empty":
+            upgrade(settings.database_url)
+            if settings.seed_demo:
+                from app.services.demo import seed_demo
+
+                run_id = seed_demo(settings)
+                print(
+                    f"mapwise: new database: schema {check.head}, demo run {run_id}",
+                    file=sys.stderr,
+                )
+        elif check.state != "current":
+            raise ServiceCliError(check.message)
+        if settings.auth_required and not _has_tokens(settings):
+            print(
+                "mapwise: warning: authentication is required but no token exists; "
+                "create one with `mapwise token create --name NAME`",
+                file=sys.stderr,
+            )
+    except SQLAlchemyError as exc:
+        raise _db_error(exc, settings.database_url) from None
+    uvicorn.run(
+        create_app(settings),
+        host=settings.host,
+        port=settings.port,
+        log_level=args.log_level,
+        ws="websockets-sansio",
+    )
+    return 0
+
+
+def _has_tokens(settings: Settings) -> bool:
+    from app.db.engine import Database
+    from app.services.tokens import TokenService
+
+    db = Database(settings.database_url)
+    try:
+        return any(t.revoked_at is None for t in TokenService(db).list())
+    finally:
+        db.dispose()
+
+
+def _cmd_db_upgrade(args: argparse.Namespace) -> int:
+    from sqlalchemy.exc import SQLAlchemyError
+
+    from app.db.migrate import check_schema, upgrade
+
+    settings = _settings(args)
+    try:
+        before = check_schema(settings.database_url)
+        if before.state == "unknown":
+            raise ServiceCliError(before.message)
+        upgrade(settings.database_url)
+        after = check_schema(settings.database_url)
+    except SQLAlchemyError as exc:
+        raise _db_error(exc, settings.database_url) from None
+    print(f"schema {before.current or 'empty'} -> {after.current}")
+    return 0
+
+
+def _cmd_db_current(args: argparse.Namespace) -> int:
+    from sqlalchemy.exc import SQLAlchemyError
+
+    from app.db.migrate import check_schema
+
+    settings = _settings(args)
+    try:
+        check = check_schema(settings.database_url)
+    except SQLAlchemyError as exc:
+        raise _db_error(exc, settings.database_url) from None
+    print(f"{check.current or 'none'} (head {check.head}): {check.state}")
+    return 0
+
+
+def _tokens(args: argparse.Namespace) -> Any:
+    from app.db.engine import Database
+    from app.db.migrate import check_schema
+    from app.services.tokens import TokenService
+
+    settings = _settings(args)
+    check = check_schema(settings.database_url)
+    if check.state != "current":
+        raise ServiceCliError(
+            check.message
+            if check.state != "empty"
+            else "the database has no schema yet; "
+            "run `mapwise db upgrade` (or `mapwise serve`) first"
+        )
+    return TokenService(Database(settings.database_url))
+
+
+def _cmd_token_create(args: argparse.Namespace) -> int:
+    token, secret = _tokens(args).create(args.name)
+    print(secret)
+    import sys
+
+    print(
+        f"token {token.id} ({token.name}) created; the secret above is shown only once",
+        file=sys.stderr,
+    )
+    return 0
+
+
+def _cmd_token_list(args: argparse.Namespace) -> int:
+    for t in _tokens(args).list():
+        state = "revoked" if t.revoked_at else "active"
+        used = t.last_used_at.isoformat(timespec="seconds") if t.last_used_at else "never"
+        print(f"{t.id:>4}  {t.prefix}…  {state:<8} last used {used:<25} {t.name}")
+    return 0
+
+
+def _cmd_token_revoke(args: argparse.Namespace) -> int:
+    from app.errors import NotFoundError
+
+    try:
+        token = _tokens(args).revoke(args.id)
+    except NotFoundError as exc:
+        raise ServiceCliError(exc.message) from None
+    print(f"token {token.id} ({token.name}) revoked")
+    return 0

@@ -1,0 +1,88 @@
+"""Alembic from code: upgrade, the current and head revisions, and the schema check the
+server makes at start-up (an out-of-date shared database is never migrated silently)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+from alembic import command
+from alembic.config import Config
+from alembic.runtime.migration import MigrationContext
+from alembic.script import ScriptDirectory
+from sqlalchemy import inspect
+
+from app.db.engine import make_engine, normalise_url
+
+MIGRATIONS_DIR = Path(__file__).resolve().parents[2] / "migrations"
+
+SchemaState = Literal["empty", "current", "outdated", "unknown"]
+
+
+def alembic_config(url: str) -> Config:
+    config = Config()
+    config.set_main_option("script_location", str(MIGRATIONS_DIR))
+    # ConfigParser interpolation: a literal % in a password must be doubled.
+    config.set_main_option("sqlalchemy.url", normalise_url(url).replace("%", "%%"))
+    return config
+
+
+def head_revision() -> str:
+    heads = ScriptDirectory.from_config(alembic_config("sqlite://")).get_heads()
+    if len(heads) != 1:
+        raise RuntimeError(f"migrations must have exactly one head, found {heads}")
+    return heads[0]
+
+
+def current_revision(url: str) -> str | None:
+    engine = make_engine(url)
+    try:
+        with engine.connect() as connection:
+            return MigrationContext.configure(connection).get_current_revision()
+    finally:
+        engine.dispose()
+
+
+def upgrade(url: str, revision: str = "head") -> None:
+    command.upgrade(alembic_config(url), revision)
+
+
+@dataclass(frozen=True, slots=True)
+class SchemaCheck:
+    state: SchemaState
+    current: str | None
+    head: str
+
+    @property
+    def message(self) -> str:
+        if self.state == "outdated":
+            return (
+                f"the database schema is at revision {self.current}, this mapwise needs "
+                f"{self.head}; back it up and run `mapwise db upgrade`"
+            )
+        if self.state == "unknown":
+            return (
+                f"the database is at revision {self.current!r}, unknown to this mapwise "
+                f"(head {self.head}); is it newer than this version?"
+            )
+        return f"schema {self.state} ({self.current})"
+
+
+def check_schema(url: str) -> SchemaCheck:
+    """``empty`` (no tables at all), ``current``, ``outdated`` or ``unknown`` (not ours)."""
+    head = head_revision()
+    engine = make_engine(url)
+    try:
+        with engine.connect() as connection:
+            current = MigrationContext.configure(connection).get_current_revision()
+            tables = set(inspect(connection).get_table_names()) - {"alembic_version"}
+    finally:
+        engine.dispose()
+    if current is None:
+        return SchemaCheck("empty" if not tables else "unknown", None, head)
+    if current == head:
+        return SchemaCheck("current", current, head)
+    script = ScriptDirectory.from_config(alembic_config(url))
+    known = {rev.revision for rev in script.walk_revisions()}
+    return SchemaCheck("outdated" if current in known else "unknown", current, head)

@@ -1,0 +1,166 @@
+"""SQLAlchemy 2 models: the schema Alembic migrations must produce exactly.
+
+Arrays live in ``LargeBinary`` columns as ``.npz`` (:mod:`app.db.blobs`); payload columns
+are deferred so lists never load them. Only :mod:`app.db.repositories` touches these classes.
+"""
+
+from __future__ import annotations
+
+from datetime import UTC, datetime
+from typing import Any
+
+from sqlalchemy import (
+    JSON,
+    Boolean,
+    DateTime,
+    Float,
+    ForeignKey,
+    Index,
+    Integer,
+    LargeBinary,
+    MetaData,
+    String,
+    Text,
+    UniqueConstraint,
+)
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
+
+NAMING = {
+    "ix": "ix_%(column_0_label)s",
+    "uq": "uq_%(table_name)s_%(column_0_name)s",
+    "ck": "ck_%(table_name)s_%(constraint_name)s",
+    "fk": "fk_%(table_name)s_%(column_0_name)s_%(referred_table_name)s",
+    "pk": "pk_%(table_name)s",
+}
+
+
+def utcnow() -> datetime:
+    return datetime.now(UTC)
+
+
+class Base(DeclarativeBase):
+    metadata = MetaData(naming_convention=NAMING)
+    type_annotation_map = {dict[str, Any]: JSON, list[Any]: JSON}  # noqa: RUF012
+
+
+class DatasetRow(Base):
+    """A log or simulation: channel list, time base and the samples as an npz payload."""
+
+    __tablename__ = "datasets"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    name: Mapped[str] = mapped_column(String(200))
+    source: Mapped[str] = mapped_column(String(64))
+    rows: Mapped[int] = mapped_column(Integer)
+    rate_hz: Mapped[float] = mapped_column(Float)
+    duration_s: Mapped[float] = mapped_column(Float)
+    time_column: Mapped[str] = mapped_column(String(200))
+    channels: Mapped[list[Any]] = mapped_column(JSON)
+    scenario: Mapped[str | None] = mapped_column(String(64))
+    seed: Mapped[int | None] = mapped_column(Integer)
+    payload: Mapped[bytes] = mapped_column(LargeBinary, deferred=True)
+    truth: Mapped[bytes | None] = mapped_column(LargeBinary, deferred=True)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+
+class RunRow(Base):
+    """One estimator session over a dataset; ``stop_request`` is how a worker is told to stop."""
+
+    __tablename__ = "runs"
+    __table_args__ = (Index("ix_runs_dataset_status", "dataset_id", "status"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    dataset_id: Mapped[int] = mapped_column(ForeignKey("datasets.id", ondelete="CASCADE"))
+    name: Mapped[str] = mapped_column(String(200))
+    estimator: Mapped[str] = mapped_column(String(64))
+    status: Mapped[str] = mapped_column(String(16), index=True)
+    progress: Mapped[float] = mapped_column(Float, default=0.0)
+    sample: Mapped[int] = mapped_column(Integer, default=0)
+    n_samples: Mapped[int] = mapped_column(Integer, default=0)
+    error: Mapped[str | None] = mapped_column(Text)
+    signals: Mapped[dict[str, Any]] = mapped_column(JSON)
+    table_spec: Mapped[dict[str, Any] | None] = mapped_column(JSON)
+    config: Mapped[dict[str, Any]] = mapped_column(JSON)
+    estimator_config: Mapped[dict[str, Any]] = mapped_column(JSON)
+    rejected: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    produces_map: Mapped[bool] = mapped_column(Boolean)
+    base_map_id: Mapped[int | None] = mapped_column(ForeignKey("base_maps.id", ondelete="SET NULL"))
+    stop_request: Mapped[str | None] = mapped_column(String(16))
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    started_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
+    finished_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
+
+
+class MapVersionRow(Base):
+    """A persisted point of a run: the map (if any), its variances and visits, the
+    estimator state it resumes from, and the output series since the previous version."""
+
+    __tablename__ = "map_versions"
+    __table_args__ = (UniqueConstraint("run_id", "step", name="uq_map_versions_run_step"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    run_id: Mapped[int] = mapped_column(ForeignKey("runs.id", ondelete="CASCADE"), index=True)
+    step: Mapped[int] = mapped_column(Integer)
+    time_s: Mapped[float] = mapped_column(Float)
+    label: Mapped[str | None] = mapped_column(String(200))
+    final: Mapped[bool] = mapped_column(Boolean, default=False)
+    axes: Mapped[list[Any] | None] = mapped_column(JSON)
+    values: Mapped[bytes | None] = mapped_column(LargeBinary, deferred=True)
+    variances: Mapped[bytes | None] = mapped_column(LargeBinary, deferred=True)
+    visits: Mapped[bytes | None] = mapped_column(LargeBinary, deferred=True)
+    cell_rejections: Mapped[bytes | None] = mapped_column(LargeBinary, deferred=True)
+    state: Mapped[bytes | None] = mapped_column(LargeBinary, deferred=True)
+    segment: Mapped[bytes | None] = mapped_column(LargeBinary, deferred=True)
+    rejected: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+
+class RunMetricRow(Base):
+    """A final metric of a run (``value``) or a downsampled result series (``series``)."""
+
+    __tablename__ = "run_metrics"
+    __table_args__ = (UniqueConstraint("run_id", "name", name="uq_run_metrics_run_name"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    run_id: Mapped[int] = mapped_column(ForeignKey("runs.id", ondelete="CASCADE"), index=True)
+    name: Mapped[str] = mapped_column(String(100))
+    unit: Mapped[str] = mapped_column(String(50), default="")
+    value: Mapped[float | None] = mapped_column(Float)
+    series: Mapped[bytes | None] = mapped_column(LargeBinary, deferred=True)
+
+
+class BaseMapRow(Base):
+    """A named starting map, promoted from a run version or imported, with its lineage."""
+
+    __tablename__ = "base_maps"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    name: Mapped[str] = mapped_column(String(200))
+    source: Mapped[str] = mapped_column(String(32))
+    axes: Mapped[list[Any]] = mapped_column(JSON)
+    values: Mapped[bytes] = mapped_column(LargeBinary, deferred=True)
+    # Lineage is a record, not a reference: it survives the deletion of its run or dataset.
+    run_id: Mapped[int | None] = mapped_column(Integer)
+    version_id: Mapped[int | None] = mapped_column(Integer)
+    dataset_id: Mapped[int | None] = mapped_column(Integer)
+    estimator: Mapped[str | None] = mapped_column(String(64))
+    config: Mapped[dict[str, Any] | None] = mapped_column(JSON)
+    parent_base_map_id: Mapped[int | None] = mapped_column(
+        ForeignKey("base_maps.id", ondelete="SET NULL")
+    )
+    metrics: Mapped[dict[str, Any]] = mapped_column(JSON, default=dict)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+
+
+class ApiTokenRow(Base):
+    """A bearer token, stored only as its SHA-256 hash."""
+
+    __tablename__ = "api_tokens"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    name: Mapped[str] = mapped_column(String(200))
+    prefix: Mapped[str] = mapped_column(String(16))
+    token_hash: Mapped[str] = mapped_column(String(64), unique=True)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
+    last_used_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
+    revoked_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))

@@ -1,0 +1,151 @@
+"""Domain objects the repositories return and the services and routers use (not ORM rows)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from datetime import datetime
+from typing import Any, Generic, TypeVar
+
+import numpy as np
+
+T = TypeVar("T")
+
+RUN_STATUSES = ("queued", "running", "succeeded", "failed", "cancelled", "interrupted")
+FINISHED = ("succeeded", "failed", "cancelled", "interrupted")
+
+
+@dataclass(frozen=True, slots=True)
+class Channel:
+    name: str
+    unit: str
+
+
+@dataclass(frozen=True, slots=True)
+class Dataset:
+    id: int
+    name: str
+    source: str
+    rows: int
+    rate_hz: float
+    duration_s: float
+    time_column: str
+    channels: list[Channel]
+    scenario: str | None
+    seed: int | None
+    has_truth: bool
+    created_at: datetime
+
+    def unit_of(self, name: str) -> str:
+        return next((c.unit for c in self.channels if c.name == name), "")
+
+    def has_channel(self, name: str) -> bool:
+        return any(c.name == name for c in self.channels)
+
+
+@dataclass(frozen=True, slots=True)
+class Run:
+    id: int
+    dataset_id: int
+    name: str
+    estimator: str
+    status: str
+    progress: float
+    sample: int
+    n_samples: int
+    error: str | None
+    signals: dict[str, str]
+    table: dict[str, Any] | None
+    config: dict[str, Any]
+    estimator_config: dict[str, Any]
+    rejected: dict[str, int]
+    produces_map: bool
+    base_map_id: int | None
+    stop_request: str | None
+    created_at: datetime
+    started_at: datetime | None
+    finished_at: datetime | None
+    metrics: dict[str, float | None] = field(default_factory=dict)
+    n_versions: int = 0
+
+    @property
+    def finished(self) -> bool:
+        return self.status in FINISHED
+
+
+@dataclass(frozen=True, slots=True)
+class VersionSummary:
+    id: int
+    run_id: int
+    step: int
+    time_s: float
+    label: str | None
+    final: bool
+    created_at: datetime
+
+
+@dataclass(frozen=True, slots=True)
+class MapVersion:
+    """A version with its arrays (``values`` is ``None`` for estimators without a map)."""
+
+    summary: VersionSummary
+    axes: list[dict[str, Any]] | None
+    values: np.ndarray | None
+    variances: np.ndarray | None
+    visits: np.ndarray | None
+    cell_rejections: dict[str, np.ndarray]
+    rejected: dict[str, int]
+
+
+@dataclass(frozen=True, slots=True)
+class ResumePoint:
+    """What a resumed run continues from: the last version's state and accumulators."""
+
+    version_id: int
+    step: int
+    state: dict[str, Any]
+    visits: np.ndarray | None
+    cell_rejections: dict[str, np.ndarray]
+    segments: list[dict[str, np.ndarray]]
+
+
+@dataclass(frozen=True, slots=True)
+class Series:
+    name: str
+    unit: str
+    time: np.ndarray
+    values: np.ndarray
+
+
+@dataclass(frozen=True, slots=True)
+class BaseMap:
+    id: int
+    name: str
+    source: str
+    axes: list[dict[str, Any]]
+    values: np.ndarray
+    run_id: int | None
+    version_id: int | None
+    dataset_id: int | None
+    estimator: str | None
+    config: dict[str, Any] | None
+    parent_base_map_id: int | None
+    metrics: dict[str, Any]
+    created_at: datetime
+
+
+@dataclass(frozen=True, slots=True)
+class ApiToken:
+    id: int
+    name: str
+    prefix: str
+    created_at: datetime
+    last_used_at: datetime | None
+    revoked_at: datetime | None
+
+
+@dataclass(frozen=True, slots=True)
+class Page(Generic[T]):
+    items: list[T]
+    total: int
+    limit: int
+    offset: int

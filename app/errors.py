@@ -1,0 +1,155 @@
+"""One error hierarchy for the service, and the one handler that renders it.
+
+Services raise :class:`AppError` subclasses (never ``HTTPException``); every error response,
+including request validation, unknown routes and wrong methods, has the body
+``{"error": {"code", "message", "field"}}``.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from app.io.errors import InputError
+from estimation.errors import EstimationError
+
+log = logging.getLogger("mapwise")
+
+
+class AppError(Exception):
+    """Base of every service error: a stable ``code``, an HTTP status and the field at fault."""
+
+    code = "error"
+    status = 500
+
+    def __init__(self, message: str, *, field: str | None = None) -> None:
+        super().__init__(message)
+        self.message = message
+        self.field = field
+
+    def body(self) -> dict[str, Any]:
+        return {"error": {"code": self.code, "message": self.message, "field": self.field}}
+
+
+class InvalidRequestError(AppError, ValueError):
+    """The request is well-formed but its content is not acceptable."""
+
+    code = "validation_error"
+    status = 422
+
+
+class MalformedRequestError(AppError, ValueError):
+    """The request body cannot be read at all (malformed JSON, wrong multipart)."""
+
+    code = "validation_error"
+    status = 400
+
+
+class NotFoundError(AppError, LookupError):
+    code = "not_found"
+    status = 404
+
+
+class ConflictError(AppError):
+    """The resource is in a state that forbids the operation."""
+
+    code = "conflict"
+    status = 409
+
+
+class PayloadTooLargeError(AppError):
+    code = "payload_too_large"
+    status = 413
+
+
+class UnsupportedFormatError(AppError, ValueError):
+    code = "unsupported_format"
+    status = 415
+
+
+class UnauthorizedError(AppError):
+    code = "unauthorized"
+    status = 401
+
+
+class MethodNotAllowedError(AppError):
+    code = "method_not_allowed"
+    status = 405
+
+
+def error_response(error: AppError) -> JSONResponse:
+    headers = {"WWW-Authenticate": "Bearer"} if isinstance(error, UnauthorizedError) else None
+    return JSONResponse(error.body(), status_code=error.status, headers=headers)
+
+
+def field_of(loc: tuple[Any, ...] | list[Any]) -> str | None:
+    """``("body", "config", "sigma_w")`` → ``"config.sigma_w"``; list indices as ``[i]``."""
+    parts: list[str] = []
+    for p in loc:
+        if p in ("body", "query", "path", "header", "cookie", "form") and not parts:
+            continue
+        if isinstance(p, int):
+            parts.append(f"[{p}]")
+        else:
+            parts.append(("." if parts else "") + str(p))
+    return "".join(parts) or None
+
+
+def install_error_handlers(app: FastAPI) -> None:
+    @app.exception_handler(AppError)
+    async def _app_error(_: Request, exc: AppError) -> JSONResponse:
+        return error_response(exc)
+
+    @app.exception_handler(RequestValidationError)
+    async def _validation(_: Request, exc: RequestValidationError) -> JSONResponse:
+        errors = exc.errors()
+        first = errors[0] if errors else {"loc": (), "msg": "invalid request"}
+        if first.get("type") == "json_invalid":
+            detail = (first.get("ctx") or {}).get("error", "")
+            return error_response(
+                MalformedRequestError(f"the request body is not valid JSON {detail}".strip())
+            )
+        if first.get("type") == "model_attributes_type" and tuple(first.get("loc", ())) == (
+            "body",
+        ):
+            return error_response(MalformedRequestError("the request body must be a JSON object"))
+        message = "; ".join(
+            f"{field_of(e.get('loc', ())) or 'body'}: {e.get('msg', 'invalid')}" for e in errors
+        )
+        return error_response(InvalidRequestError(message, field=field_of(first.get("loc", ()))))
+
+    @app.exception_handler(StarletteHTTPException)
+    async def _http(_: Request, exc: StarletteHTTPException) -> JSONResponse:
+        error: AppError
+        if exc.status_code == 404:
+            error = NotFoundError(str(exc.detail) if exc.detail != "Not Found" else "no such route")
+        elif exc.status_code == 405:
+            error = MethodNotAllowedError("method not allowed on this route")
+        else:
+            error = AppError(str(exc.detail))
+            error.status = exc.status_code
+            error.code = "http_error"
+        response = error_response(error)
+        if exc.headers:
+            response.headers.update(exc.headers)
+        return response
+
+    @app.exception_handler(InputError)
+    async def _input(_: Request, exc: InputError) -> JSONResponse:
+        return JSONResponse({"error": exc.to_dict()}, status_code=exc.status)
+
+    @app.exception_handler(EstimationError)
+    async def _estimation(_: Request, exc: EstimationError) -> JSONResponse:
+        return error_response(InvalidRequestError(" ".join(str(exc).split())))
+
+    @app.exception_handler(Exception)
+    async def _internal(_: Request, exc: Exception) -> JSONResponse:
+        log.exception("unhandled error", exc_info=exc)
+        error = AppError("internal error; see the server log")
+        error.code = "internal_error"
+        return error_response(error)

@@ -1,0 +1,1 @@
+"""Run execution: worker processes, the executor that feeds them, and the live hub."""

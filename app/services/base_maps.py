@@ -1,0 +1,63 @@
+"""Base maps: a run's map version promoted to a named starting map, or a map file imported
+(JSON / CSV / DCM), each with its lineage (run, version, dataset, estimator, config, parent
+base map, metrics) kept as a record that survives the deletion of what it came from."""
+
+from __future__ import annotations
+
+from app.db.engine import Database
+from app.db.repositories import BaseMapRepo, RunRepo, VersionRepo
+from app.domain import BaseMap, Page
+from app.errors import ConflictError, InvalidRequestError
+
+
+class BaseMapService:
+    def __init__(self, db: Database) -> None:
+        self.db = db
+
+    def promote(self, *, run_id: int, version_id: int, name: str) -> BaseMap:
+        with self.db.write() as s:
+            run = RunRepo(s).get(run_id)
+            version = VersionRepo(s).get(run_id, version_id)
+            if version.values is None or version.axes is None:
+                raise ConflictError(f"run {run_id} ({run.estimator}) has no map", field="run_id")
+            return BaseMapRepo(s).add(
+                name=_name(name),
+                source="run",
+                axes=version.axes,
+                values=version.values,
+                run_id=run.id,
+                version_id=version.summary.id,
+                dataset_id=run.dataset_id,
+                estimator=run.estimator,
+                config=run.config,
+                parent_base_map_id=run.base_map_id,
+                metrics=run.metrics,
+            )
+
+    def import_file(self, data: bytes, *, name: str | None, filename: str | None) -> BaseMap:
+        from app.io.export import import_map
+
+        table = import_map(data, name=None)
+        with self.db.write() as s:
+            return BaseMapRepo(s).add(
+                name=_name(name or filename or "imported map"),
+                source="file",
+                axes=[a.to_dict() for a in table.axes],
+                values=table.values,
+            )
+
+    def get(self, base_map_id: int) -> BaseMap:
+        with self.db.read() as s:
+            return BaseMapRepo(s).get(base_map_id)
+
+    def list(self, *, limit: int, offset: int) -> Page[BaseMap]:
+        with self.db.read() as s:
+            return BaseMapRepo(s).list(limit=limit, offset=offset)
+
+
+def _name(text: str) -> str:
+    clean = "".join(ch for ch in text.replace("\\", "/").rsplit("/", 1)[-1] if ch.isprintable())
+    clean = clean.strip()
+    if not clean:
+        raise InvalidRequestError("a base map needs a name", field="name")
+    return clean[:200]

@@ -1,0 +1,361 @@
+"""From a run request to a validated estimator config and the run's service options.
+
+The request (``POST /api/runs``) names a dataset, an estimator, the dataset columns playing
+the estimator's signal roles, a table grid and a config. Service-level keys (``pace``,
+``version_every``, ``gates``, ``locked``) are taken out of the config first; the rest is
+validated against the estimator's own config model, so a table filter gets exactly the
+config ``mapwise adapt`` builds for the same flags (axes with the log's units, ``output``,
+``output_unit``), and the two give the same map.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from app.domain import BaseMap, Dataset
+from app.errors import InvalidRequestError, field_of
+from app.services.catalog import TABLE_ROLE, kind_of, needs_table, roles
+from estimation.errors import ConfigError, EstimationError
+from estimation.estimator import EstimatorSpec, registry
+from estimation.table import Axis, Grid, broadcast_cells
+
+SERVICE_KEYS = ("pace", "version_every", "gates", "locked")
+
+
+class AxisSpec(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    name: str = Field(min_length=1, description="Dataset column the axis reads.")
+    breakpoints: list[float] = Field(min_length=2, description="Strictly increasing.")
+    unit: str | None = Field(None, description="Default: the column's unit in the dataset.")
+
+
+class TableSpec(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    axes: list[AxisSpec] = Field(min_length=1)
+    values: Any = Field(
+        None, description="Starting values: a scalar or nested lists in axis order (θ0)."
+    )
+
+
+class RunRequest(BaseModel):
+    """Body of ``POST /api/runs``."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    dataset_id: int = Field(ge=1, le=2**31 - 1)
+    estimator: str = Field(min_length=1)
+    signals: dict[str, str] = Field(
+        default_factory=dict, description="Estimator signal role → dataset column."
+    )
+    table: TableSpec | None = None
+    config: dict[str, Any] = Field(default_factory=dict)
+    base_map_id: int | None = Field(None, ge=1, le=2**31 - 1)
+    name: str | None = Field(None, max_length=200)
+
+
+@dataclass(frozen=True, slots=True)
+class RunOptions:
+    """Service-level settings of a run (not the estimator's)."""
+
+    pace: float | None  # real-time multiple; None: as fast as possible
+    version_every: int  # samples between persisted map versions
+    gates: list[dict[str, Any]]
+
+
+@dataclass(frozen=True, slots=True)
+class RunPlan:
+    estimator: str
+    estimator_config: dict[str, Any]
+    signals: dict[str, str]
+    table_spec: dict[str, Any] | None
+    config: dict[str, Any]
+    produces_map: bool
+    n_samples: int
+    name: str
+
+
+def _spec(name: str) -> EstimatorSpec:
+    specs = registry()
+    if name not in specs:
+        raise InvalidRequestError(
+            f"unknown estimator {name!r}; choose one of {sorted(specs)}", field="estimator"
+        )
+    return specs[name]
+
+
+def run_options(config: dict[str, Any], rows: int, rate_hz: float, fraction: float) -> RunOptions:
+    """Parse the service keys of a run config (validated again by every worker)."""
+    pace_raw = config.get("pace", "max")
+    if pace_raw == "max" or pace_raw is None:
+        pace = None
+    elif isinstance(pace_raw, int | float) and not isinstance(pace_raw, bool):
+        if not (math.isfinite(pace_raw) and pace_raw > 0):
+            raise InvalidRequestError(
+                f"pace must be 'max' or a positive real-time multiple, got {pace_raw!r}",
+                field="config.pace",
+            )
+        pace = float(pace_raw)
+    else:
+        raise InvalidRequestError(
+            f"pace must be 'max' or a positive real-time multiple, got {pace_raw!r}",
+            field="config.pace",
+        )
+    every_raw = config.get("version_every")
+    if every_raw is None:
+        every = max(1, math.ceil(rows * fraction))
+    elif isinstance(every_raw, dict) and set(every_raw) == {"samples"}:
+        n = every_raw["samples"]
+        if not isinstance(n, int) or isinstance(n, bool) or n < 1:
+            raise InvalidRequestError(
+                f"version_every.samples must be an integer >= 1, got {n!r}",
+                field="config.version_every.samples",
+            )
+        every = n
+    elif isinstance(every_raw, dict) and set(every_raw) == {"seconds"}:
+        sec = every_raw["seconds"]
+        if not isinstance(sec, int | float) or isinstance(sec, bool) or not sec > 0:
+            raise InvalidRequestError(
+                f"version_every.seconds must be > 0, got {sec!r}",
+                field="config.version_every.seconds",
+            )
+        every = max(1, round(sec * rate_hz))
+    else:
+        raise InvalidRequestError(
+            'version_every must be {"samples": N} or {"seconds": S}',
+            field="config.version_every",
+        )
+    gates = config.get("gates") or []
+    if not isinstance(gates, list):
+        raise InvalidRequestError("gates must be a list of gate objects", field="config.gates")
+    return RunOptions(pace=pace, version_every=every, gates=gates)
+
+
+def _check_column(dataset: Dataset, column: str, field: str) -> None:
+    if not dataset.has_channel(column):
+        names = [c.name for c in dataset.channels]
+        raise InvalidRequestError(
+            f"column {column!r} is not in dataset {dataset.id}; its channels: {names}",
+            field=field,
+        )
+
+
+def _axes(
+    table: TableSpec | None, base_map: BaseMap | None, dataset: Dataset
+) -> list[dict[str, Any]] | None:
+    if table is not None:
+        axes = []
+        for i, a in enumerate(table.axes):
+            _check_column(dataset, a.name, f"table.axes[{i}].name")
+            unit = a.unit if a.unit is not None else dataset.unit_of(a.name)
+            try:
+                Axis(a.name, unit, a.breakpoints)
+            except EstimationError as exc:
+                raise InvalidRequestError(str(exc), field=f"table.axes[{i}].breakpoints") from exc
+            axes.append({"name": a.name, "breakpoints": list(a.breakpoints), "unit": unit})
+        names = [a["name"] for a in axes]
+        if len(set(names)) != len(names):
+            raise InvalidRequestError(f"axis names must be unique, got {names}", field="table.axes")
+        if base_map is not None:
+            mine = [a["breakpoints"] for a in axes]
+            theirs = [a["breakpoints"] for a in base_map.axes]
+            if mine != theirs:
+                raise InvalidRequestError(
+                    f"the table grid does not match base map {base_map.id}'s grid",
+                    field="base_map_id",
+                )
+        return axes
+    if base_map is not None:
+        for i, a in enumerate(base_map.axes):
+            _check_column(dataset, a["name"], f"table.axes[{i}].name")
+        return [
+            {"name": a["name"], "breakpoints": list(a["breakpoints"]), "unit": a.get("unit", "")}
+            for a in base_map.axes
+        ]
+    return None
+
+
+def locked_cells(raw: Any, shape: tuple[int, ...]) -> list[list[int]]:
+    """Locked cells as index lists from flat indices, a boolean mask or index lists."""
+    field = "config.locked"
+    if raw is None or raw == []:
+        return []
+    if not isinstance(raw, list):
+        raise InvalidRequestError("locked must be a list", field=field)
+    size = math.prod(shape)
+    if all(isinstance(i, int) and not isinstance(i, bool) for i in raw):
+        bad = [i for i in raw if not 0 <= i < size]
+        if bad:
+            raise InvalidRequestError(
+                f"flat cell indices {bad} are outside 0..{size - 1}", field=field
+            )
+        return [list(map(int, np.unravel_index(i, shape))) for i in raw]
+    arr = np.array(raw, dtype=object)
+    if arr.shape == shape and all(isinstance(v, bool) for v in arr.ravel()):
+        return [list(map(int, ix)) for ix in np.argwhere(arr.astype(bool))]
+    if all(isinstance(c, list) and all(isinstance(i, int) for i in c) for c in raw):
+        return [list(c) for c in raw]
+    raise InvalidRequestError(
+        f"locked must be flat cell indices, index lists, or a boolean mask of shape {shape}",
+        field=field,
+    )
+
+
+def plan_run(
+    request: RunRequest,
+    dataset: Dataset,
+    base_map: BaseMap | None,
+    *,
+    version_fraction: float,
+) -> RunPlan:
+    """Validate a run request against its dataset; raise 422 errors naming the field."""
+    spec = _spec(request.estimator)
+    kind = kind_of(spec)
+    config = dict(request.config)
+    options = run_options(config, dataset.rows, dataset.rate_hz, version_fraction)
+    estimator_config = {k: v for k, v in config.items() if k not in SERVICE_KEYS}
+    role_map = {r.role: r for r in roles(spec)}
+    for role, column in request.signals.items():
+        if role not in role_map:
+            raise InvalidRequestError(
+                f"{spec.name} has no signal role {role!r}; its roles: {sorted(role_map)}",
+                field=f"signals.{role}",
+            )
+        _check_column(dataset, column, f"signals.{role}")
+    axes = _axes(request.table, base_map, dataset) if needs_table(spec) else None
+    if request.table is not None and not needs_table(spec):
+        raise InvalidRequestError(f"{spec.name} has no table", field="table")
+    if kind == "table-filter":
+        if axes is None:
+            raise InvalidRequestError(f"{spec.name} needs a table grid", field="table")
+        output = request.signals.get(TABLE_ROLE)
+        if output is None:
+            raise InvalidRequestError(
+                f"{spec.name} needs the measured output column as signals.y", field="signals.y"
+            )
+        estimator_config |= {
+            "axes": axes,
+            "output": output,
+            "output_unit": dataset.unit_of(output),
+        }
+        start = _start_values(request.table, base_map, axes)
+        if start is not None and "theta0" not in estimator_config:
+            estimator_config["theta0"] = start
+        if "locked" in config:
+            shape = tuple(len(a["breakpoints"]) for a in axes)
+            estimator_config["locked"] = locked_cells(config["locked"], shape)
+    else:
+        if "locked" in config:
+            raise InvalidRequestError(
+                f"locked cells apply to the table filters, not {spec.name}", field="config.locked"
+            )
+        if base_map is not None or (request.table is not None and request.table.values is not None):
+            raise InvalidRequestError(
+                f"{spec.name} does not start from a given map", field="base_map_id"
+            )
+        if axes is not None:
+            estimator_config["axes"] = axes
+        for role, column in request.signals.items():
+            _set_dotted(estimator_config, role, column)
+        if kind == "torque" and options.gates:
+            raise InvalidRequestError(
+                f"{spec.name} integrates every sample; sample gates do not apply",
+                field="config.gates",
+            )
+    if options.gates:
+        from app.services.gates import parse_gates
+
+        parse_gates(options.gates, [c.name for c in dataset.channels], field="config.gates")
+    model = _validate_config(spec, estimator_config)
+    try:
+        estimator = spec.build(model)
+    except EstimationError as exc:
+        raise InvalidRequestError(" ".join(str(exc).split()), field="config") from exc
+    _check_required(estimator.required_signals(), dataset, request, spec)
+    return RunPlan(
+        estimator=spec.name,
+        estimator_config=model.model_dump(mode="json"),
+        signals=dict(request.signals),
+        table_spec=None if axes is None else {"axes": axes},
+        config=config,
+        produces_map=spec.produces_map,
+        n_samples=dataset.rows,
+        name=request.name or f"{spec.name} on {dataset.name}",
+    )
+
+
+def _start_values(
+    table: TableSpec | None, base_map: BaseMap | None, axes: list[dict[str, Any]]
+) -> Any:
+    shape = tuple(len(a["breakpoints"]) for a in axes)
+    if table is not None and table.values is not None:
+        try:
+            return broadcast_cells(table.values, shape, what="table.values").tolist()
+        except EstimationError as exc:
+            raise InvalidRequestError(str(exc), field="table.values") from exc
+    if base_map is not None:
+        return np.asarray(base_map.values, dtype=np.float64).reshape(shape).tolist()
+    return None
+
+
+def _set_dotted(config: dict[str, Any], key: str, value: str) -> None:
+    node = config
+    parts = key.split(".")
+    for part in parts[:-1]:
+        node = node.setdefault(part, {})
+    node[parts[-1]] = value
+
+
+_FIELD_OF_KEY = {"axes": "table.axes", "output": "signals.y", "output_unit": "signals.y"}
+
+
+def _validate_config(spec: EstimatorSpec, config: dict[str, Any]) -> BaseModel:
+    try:
+        return spec.config_model.model_validate(config)
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        loc = tuple(first["loc"])
+        head = str(loc[0]) if loc else ""
+        if head in _FIELD_OF_KEY:
+            rest = field_of(loc[1:]) or ""
+            field = _FIELD_OF_KEY[head] + (rest if rest.startswith("[") or not rest else f".{rest}")
+        else:
+            field = f"config.{field_of(loc)}" if loc else "config"
+        messages = "; ".join(
+            f"{field_of(e['loc']) or 'config'}: {e['msg'].removeprefix('Value error, ')}"
+            for e in exc.errors()
+        )
+        raise InvalidRequestError(f"{spec.name}: {messages}", field=field) from exc
+    except ConfigError as exc:
+        raise InvalidRequestError(str(exc), field="config") from exc
+
+
+def _check_required(
+    required: list[str], dataset: Dataset, request: RunRequest, spec: EstimatorSpec
+) -> None:
+    missing = [c for c in required if not dataset.has_channel(c)]
+    if not missing:
+        return
+    by_column = {column: role for role, column in request.signals.items()}
+    defaults = {r.default: r.role for r in roles(spec) if r.default}
+    column = missing[0]
+    role = by_column.get(column) or defaults.get(column)
+    raise InvalidRequestError(
+        f"{spec.name} needs channel{'s' if len(missing) > 1 else ''} "
+        f"{', '.join(repr(c) for c in missing)}, not in dataset {dataset.id}; map "
+        f"{'signals.' + role if role else 'the roles'} to one of "
+        f"{[c.name for c in dataset.channels]}",
+        field=f"signals.{role}" if role else "signals",
+    )
+
+
+def grid_shape(table_spec: dict[str, Any] | None) -> tuple[int, ...] | None:
+    if table_spec is None:
+        return None
+    return Grid([Axis.from_dict(a) for a in table_spec["axes"]]).shape

@@ -1,0 +1,316 @@
+"""Runs: create, list, cancel, resume; their versions, series, cells, exports and comparisons."""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+
+from app.adapt import map_document
+from app.config import Settings
+from app.db.engine import Database
+from app.db.repositories import BaseMapRepo, DatasetRepo, MetricRepo, RunRepo, VersionRepo
+from app.domain import MapVersion, Page, Run, Series, VersionSummary
+from app.errors import ConflictError, InvalidRequestError, NotFoundError
+from app.services.datasets import unpack_signals
+from app.services.decimate import stride_decimate
+from app.services.run_plan import RunRequest, plan_run
+from estimation.estimator import Snapshot
+from estimation.signals import Signals
+from estimation.table import Axis, Table
+
+EXPORT_FORMATS = ("json", "csv", "mcap", "dcm")
+RESUMABLE = ("interrupted", "cancelled")
+
+
+class Submitter(Protocol):
+    def submit(self, run_id: int) -> None: ...
+
+    def deliver_local(self, message: dict[str, Any]) -> None: ...
+
+
+@dataclass(frozen=True, slots=True)
+class Download:
+    content: bytes
+    media_type: str
+    filename: str
+
+
+def table_of(version: MapVersion) -> Table:
+    if version.axes is None or version.values is None:
+        raise ConflictError("this run has no map", field="format")
+    return Table([Axis.from_dict(a) for a in version.axes], version.values)
+
+
+def _safe_name(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_") or "map"
+
+
+class RunService:
+    def __init__(self, db: Database, settings: Settings, executor: Submitter | None) -> None:
+        self.db = db
+        self.settings = settings
+        self.executor = executor
+
+    def _submit(self, run_id: int) -> None:
+        if self.executor is None:
+            raise ConflictError("this server does not execute runs", field=None)
+        self.executor.submit(run_id)
+
+    # -- lifecycle ----------------------------------------------------------------------------
+
+    def create(self, request: RunRequest) -> Run:
+        with self.db.read() as s:
+            dataset = DatasetRepo(s).get(request.dataset_id)
+            base_map = None
+            if request.base_map_id is not None:
+                base_map = BaseMapRepo(s).get(request.base_map_id)
+        plan = plan_run(request, dataset, base_map, version_fraction=self.settings.version_fraction)
+        with self.db.write() as s:
+            run = RunRepo(s).add(
+                dataset_id=dataset.id,
+                name=plan.name,
+                estimator=plan.estimator,
+                signals=plan.signals,
+                table_spec=plan.table_spec,
+                config=plan.config,
+                estimator_config=plan.estimator_config,
+                produces_map=plan.produces_map,
+                n_samples=plan.n_samples,
+                base_map_id=request.base_map_id,
+            )
+        self._submit(run.id)
+        return run
+
+    def get(self, run_id: int) -> Run:
+        with self.db.read() as s:
+            return RunRepo(s).get(run_id)
+
+    def list(
+        self, *, limit: int, offset: int, dataset_id: int | None, status: str | None
+    ) -> Page[Run]:
+        with self.db.read() as s:
+            return RunRepo(s).list(limit=limit, offset=offset, dataset_id=dataset_id, status=status)
+
+    def cancel(self, run_id: int) -> Run:
+        with self.db.write() as s:
+            runs = RunRepo(s)
+            run = runs.get(run_id)
+            if run.finished:
+                raise ConflictError(f"run {run_id} is already {run.status}", field="run_id")
+            if run.status == "queued":
+                runs.set_status(run_id, "cancelled", only_if=("queued",), finished=True)
+                cancelled_queued = True
+            else:
+                runs.request_stop(run_id, "cancel")
+                cancelled_queued = False
+        if cancelled_queued and self.executor is not None:
+            self.executor.deliver_local(
+                {"kind": "status", "run_id": run_id, "status": "cancelled", "error": None}
+            )
+        return self.get(run_id)
+
+    def resume(self, run_id: int) -> Run:
+        with self.db.write() as s:
+            runs = RunRepo(s)
+            run = runs.get(run_id)
+            if run.status not in RESUMABLE:
+                raise ConflictError(
+                    f"only interrupted or cancelled runs resume; run {run_id} is {run.status}",
+                    field="run_id",
+                )
+            runs.reset_for_resume(run_id)
+        self._submit(run_id)
+        if self.executor is not None:
+            self.executor.deliver_local(
+                {"kind": "status", "run_id": run_id, "status": "queued", "error": None}
+            )
+        return self.get(run_id)
+
+    # -- versions -------------------------------------------------------------------------------
+
+    def versions(self, run_id: int) -> list[VersionSummary]:
+        with self.db.read() as s:
+            RunRepo(s).get(run_id)
+            return VersionRepo(s).list(run_id)
+
+    def version(self, run_id: int, version_id: int) -> MapVersion:
+        with self.db.read() as s:
+            RunRepo(s).get(run_id)
+            return VersionRepo(s).get(run_id, version_id)
+
+    def latest_version(self, run_id: int) -> MapVersion | None:
+        with self.db.read() as s:
+            RunRepo(s).get(run_id)
+            return VersionRepo(s).latest(run_id)
+
+    def label(self, run_id: int, version_id: int, label: str | None) -> VersionSummary:
+        with self.db.write() as s:
+            return VersionRepo(s).set_label(run_id, version_id, label)
+
+    # -- results --------------------------------------------------------------------------------
+
+    def series(self, run_id: int, *, points: int) -> tuple[np.ndarray, list[Series]]:
+        with self.db.read() as s:
+            RunRepo(s).get(run_id)
+            stored = MetricRepo(s).series(run_id)
+        if not stored:
+            return np.empty(0), []
+        time = stored[0].time
+        index = stride_decimate(time.size, points)
+        return time[index], [Series(x.name, x.unit, x.time[index], x.values[index]) for x in stored]
+
+    def cells(self, run_id: int) -> MapVersion | None:
+        return self.latest_version(run_id)
+
+    def compare(self, run_ids: list[int]) -> list[tuple[Run, MapVersion | None]]:
+        if not run_ids:
+            raise InvalidRequestError("give run ids as ?runs=1,2,3", field="runs")
+        out = []
+        with self.db.read() as s:
+            for run_id in run_ids:
+                out.append((RunRepo(s).get(run_id), VersionRepo(s).latest(run_id)))
+        return out
+
+    # -- export ---------------------------------------------------------------------------------
+
+    def export(
+        self, run_id: int, *, fmt: str, version_id: int | None, part: str | None
+    ) -> Download:
+        if fmt not in EXPORT_FORMATS:
+            raise InvalidRequestError(
+                f"format must be one of {', '.join(EXPORT_FORMATS)}, got {fmt!r}", field="format"
+            )
+        with self.db.read() as s:
+            run = RunRepo(s).get(run_id)
+            versions = VersionRepo(s)
+            version = (
+                versions.get(run_id, version_id)
+                if version_id is not None
+                else versions.latest(run_id)
+            )
+        stem = _safe_name(f"run{run.id}-{run.estimator}")
+        if fmt == "mcap":
+            return Download(self._mcap(run), "application/octet-stream", f"{stem}.mcap")
+        if fmt == "csv" and (part == "series" or (part is None and not run.produces_map)):
+            return Download(self._series_csv(run), "text/csv; charset=utf-8", f"{stem}-series.csv")
+        if part not in (None, "map"):
+            raise InvalidRequestError("part must be 'map' or 'series'", field="part")
+        if version is None:
+            raise ConflictError(f"run {run_id} has no map version yet", field="version")
+        if fmt == "json":
+            return Download(
+                _json_bytes(self._map_document(run, version)),
+                "application/json",
+                f"{stem}.json",
+            )
+        table = table_of(version)
+        output = run.estimator_config.get("output")
+        unit = str(run.estimator_config.get("output_unit", ""))
+        if fmt == "csv":
+            from app.io.export import map_to_csv
+
+            text = map_to_csv(table, value_name=str(output or "value"), value_unit=unit)
+            return Download(text.encode(), "text/csv; charset=utf-8", f"{stem}.csv")
+        from app.io.export import map_to_dcm
+
+        name = _safe_name(str(output or run.estimator)).upper()
+        description = f"mapwise run {run.id} ({run.estimator}), version {version.summary.id}"
+        text = map_to_dcm(table, name=name, unit=unit, description=description)
+        return Download(text.encode(), "text/plain; charset=utf-8", f"{stem}.dcm")
+
+    def _map_document(self, run: Run, version: MapVersion) -> dict[str, Any]:
+        """The ``mapwise adapt`` document of a version (the same function the CLI uses)."""
+        table = table_of(version)
+        snapshot = Snapshot(
+            estimator=run.estimator,
+            sample=version.summary.step,
+            n_samples=run.n_samples,
+            time_s=version.summary.time_s,
+            state=None,
+            chunk_start=0,
+            table=table,
+            variance=version.variances,
+            rejected=version.rejected,
+        )
+        estimate_s = float(run.metrics.get("run_s") or 0.0)
+        return map_document(snapshot, samples=version.summary.step, estimate_s=estimate_s)
+
+    def _run_signals(self, run: Run) -> Signals:
+        """The run's channels and per-sample outputs at full rate (outputs where all finite)."""
+        with self.db.read() as s:
+            datasets = DatasetRepo(s)
+            dataset = datasets.get(run.dataset_id)
+            signals = unpack_signals(datasets.payload(run.dataset_id), dataset.channels)
+            segments = VersionRepo(s).segments(run.id)
+        used = [a["name"] for a in (run.table or {}).get("axes", [])] + list(run.signals.values())
+        names = [n for n in dict.fromkeys(used) if n in signals] or signals.names
+        outputs: dict[str, list[np.ndarray]] = {}
+        for segment in segments:
+            for name, values in segment.items():
+                if name != "__status__":
+                    outputs.setdefault(name, []).append(values)
+        n = len(signals)
+        full = {k: np.concatenate(v) for k, v in outputs.items()}
+        full = {k: v for k, v in full.items() if v.size == n}
+        start = 0
+        for values in full.values():
+            finite = np.isfinite(values)
+            if finite.any():
+                start = max(start, int(np.argmax(finite)))
+        channels = {name: signals[name][start:] for name in names}
+        units = {name: signals.units[name] for name in names}
+        for name, values in full.items():
+            if name not in channels and np.all(np.isfinite(values[start:])):
+                channels[name] = values[start:]
+                units[name] = ""
+        return Signals(signals.time[start:], channels, units)
+
+    def _mcap(self, run: Run) -> bytes:
+        from app.io.export import MapVersionRecord, run_to_mcap
+
+        with self.db.read() as s:
+            records = VersionRepo(s).records(run.id)
+        records = [r for r in records if r.values is not None]
+        axes = [Axis.from_dict(a) for a in records[0].axes] if records and records[0].axes else None
+        versions = [
+            MapVersionRecord(
+                step=r.summary.step,
+                time_s=r.summary.time_s,
+                values=np.asarray(r.values),
+                variances=None if r.variances is None else np.asarray(r.variances),
+                label=r.summary.label,
+                final=r.summary.final,
+            )
+            for r in records
+        ]
+        metadata = {
+            "run_id": str(run.id),
+            "estimator": run.estimator,
+            "dataset_id": str(run.dataset_id),
+            "status": run.status,
+        }
+        return run_to_mcap(
+            signals=self._run_signals(run), axes=axes, versions=versions, metadata=metadata
+        )
+
+    def _series_csv(self, run: Run) -> bytes:
+        from app.io.export import series_to_csv
+
+        signals = self._run_signals(run)
+        channels = {n: (signals.units.get(n, ""), signals[n]) for n in signals.names}
+        return series_to_csv(signals.time, channels).encode()
+
+
+def _json_bytes(document: dict[str, Any]) -> bytes:
+    import json
+
+    return json.dumps(document).encode()
+
+
+def require_found(value: Any, message: str) -> Any:
+    if value is None:
+        raise NotFoundError(message)
+    return value

@@ -1,0 +1,225 @@
+"""Service benchmark (figures for the README; not a test).
+
+Against a real ``mapwise serve`` process:
+
+1. upload a 1-hour 100 Hz log (360 000 rows, 12 channels) as CSV, run the SKF on a 12×18
+   grid at full speed, and wait until its versions, metrics and series are persisted:
+   seconds per phase and rows/s;
+2. a paced run watched by 20 WebSocket viewers: frames/s each viewer receives;
+3. meanwhile, API latency (p50/p99) of ``GET /api/runs/{id}`` and ``GET /api/datasets``
+   polled by 4 concurrent clients.
+
+    .venv/bin/python scripts/bench_service.py [--database-url URL] [--rows N] [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import socket
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import httpx
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+SPEED = [750, 780, 1000, 1250, 1500, 1750, 2000, 2500, 3000, 3500, 4000, 4500]
+FUEL = [0, 5, 10, 15, 20, 25, 30, 34, 38, 42, 46, 50, 55, 60, 65, 70, 75, 80]
+
+
+def make_log(path: Path, rows: int, rate_hz: float = 100.0) -> None:
+    """A drive-like log: speed, fuel, NOx from a smooth map, plus nine other channels."""
+    rng = np.random.default_rng(0)
+    t = np.arange(rows) / rate_hz
+    speed = 2600 + 1500 * np.sin(t / 37.0) + 300 * np.sin(t / 5.3)
+    fuel = 40 + 35 * np.sin(t / 23.0 + 1.0) + 5 * rng.standard_normal(rows)
+    nox = 200 + 0.15 * speed + 8.0 * fuel + 25 * rng.standard_normal(rows)
+    extra = {f"ch{i}": 10 * np.sin(t / (3.0 + i)) + rng.standard_normal(rows) for i in range(9)}
+    names = ["speed_rpm [rpm]", "fuel_mg_per_stroke [mg/stroke]", "nox_ppm [ppm]"]
+    header = ["time [s]", *names, *(f"{k} [-]" for k in extra)]
+    data = np.column_stack([t, speed, fuel, nox, *extra.values()])
+    with path.open("w") as f:
+        f.write(",".join(header) + "\n")
+        np.savetxt(f, data, delimiter=",", fmt="%.6f")
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def start_server(url: str, port: int, log: Path) -> subprocess.Popen[bytes]:
+    args = [
+        sys.executable, "-m", "app.cli", "serve", "--port", str(port), "--database-url", url,
+        "--no-demo", "--log-level", "warning",
+    ]  # fmt: skip
+    proc = subprocess.Popen(
+        args, cwd=ROOT, stdout=log.open("w"), stderr=subprocess.STDOUT, start_new_session=True
+    )
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:
+        try:
+            if httpx.get(f"http://127.0.0.1:{port}/api/health").status_code == 200:
+                return proc
+        except httpx.TransportError:
+            time.sleep(0.2)
+    raise RuntimeError(f"server did not start: {log.read_text()[-2000:]}")
+
+
+def wait(client: httpx.Client, run_id: int, until: tuple[str, ...]) -> dict[str, Any]:
+    while True:
+        run = client.get(f"/api/runs/{run_id}").json()
+        if run["status"] in until:
+            return run
+        time.sleep(0.05)
+
+
+def run_body(dataset_id: int, **config: Any) -> dict[str, Any]:
+    return {
+        "dataset_id": dataset_id,
+        "estimator": "skf",
+        "signals": {"y": "nox_ppm"},
+        "table": {
+            "axes": [
+                {"name": "speed_rpm", "breakpoints": SPEED},
+                {"name": "fuel_mg_per_stroke", "breakpoints": FUEL},
+            ]
+        },
+        "config": {"sigma_w": 15, "sigma_v": 25, "p0": 1e4, **config},
+    }
+
+
+def viewer(url: str, seconds: float, counts: list[int], index: int) -> None:
+    from websockets.sync.client import connect
+
+    end = time.monotonic() + seconds
+    n = 0
+    with connect(url, max_size=None) as ws:
+        while time.monotonic() < end:
+            try:
+                message = json.loads(ws.recv(timeout=max(0.01, end - time.monotonic())))
+            except TimeoutError:
+                break
+            if message["type"] in ("delta", "full"):
+                n += 1
+    counts[index] = n
+
+
+def poller(base: str, paths: list[str], stop: threading.Event, out: list[float]) -> None:
+    with httpx.Client(base_url=base, timeout=30) as client:
+        while not stop.is_set():
+            for path in paths:
+                t0 = time.perf_counter()
+                client.get(path).raise_for_status()
+                out.append(time.perf_counter() - t0)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--database-url", help="default: a fresh SQLite file")
+    parser.add_argument("--rows", type=int, default=360_000)
+    parser.add_argument("--viewers", type=int, default=20)
+    parser.add_argument("--live-seconds", type=float, default=20.0)
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args()
+    work = Path(tempfile.mkdtemp(prefix="mapwise-bench-"))
+    url = args.database_url or f"sqlite:///{work / 'bench.db'}"
+    log_path = work / "log.csv"
+    make_log(log_path, args.rows)
+    port = free_port()
+    proc = start_server(url, port, work / "server.log")
+    base = f"http://127.0.0.1:{port}"
+    result: dict[str, Any] = {
+        "rows": args.rows,
+        "channels": 12,
+        "csv_mb": round(log_path.stat().st_size / 2**20, 1),
+        "database": url.split(":")[0],
+        "cpus": os.cpu_count(),
+    }
+    try:
+        with httpx.Client(base_url=base, timeout=600) as client:
+            # warm the run workers (imports, compiled kernels) as a server in use would be
+            small = "time,speed_rpm,fuel_mg_per_stroke,nox_ppm\n" + "".join(
+                f"{k * 0.01},{1000 + k},{10 + k % 50},{100 + k % 7}\n" for k in range(500)
+            )
+            tiny = client.post("/api/datasets", files={"file": ("w.csv", small.encode())}).json()
+            for _ in range(2):
+                warm = client.post("/api/runs", json=run_body(tiny["id"])).json()
+                wait(client, warm["id"], ("succeeded", "failed"))
+            t0 = time.perf_counter()
+            with log_path.open("rb") as f:
+                response = client.post("/api/datasets", files={"file": ("drive.csv", f)})
+            response.raise_for_status()
+            dataset = response.json()
+            t1 = time.perf_counter()
+            run = client.post("/api/runs", json=run_body(dataset["id"])).json()
+            done = wait(client, run["id"], ("succeeded", "failed"))
+            t2 = time.perf_counter()
+            assert done["status"] == "succeeded", done["error"]
+            result |= {
+                "upload_s": round(t1 - t0, 2),
+                "run_and_persist_s": round(t2 - t1, 2),
+                "estimator_s": round(done["metrics"]["run_s"], 3),
+                "total_s": round(t2 - t0, 2),
+                "rows_per_s": round(args.rows / (t2 - t0)),
+                "versions": done["n_versions"],
+            }
+
+            duration_s = args.rows / 100.0
+            pace = duration_s / (args.live_seconds * 1.5)
+            live = client.post("/api/runs", json=run_body(dataset["id"], pace=pace)).json()
+            wait(client, live["id"], ("running",))
+            counts = [0] * args.viewers
+            ws_url = f"ws://127.0.0.1:{port}/api/runs/{live['id']}/stream"
+            threads = [
+                threading.Thread(target=viewer, args=(ws_url, args.live_seconds, counts, i))
+                for i in range(args.viewers)
+            ]
+            latencies: list[float] = []
+            stop = threading.Event()
+            paths = [f"/api/runs/{live['id']}", "/api/datasets"]
+            pollers = [
+                threading.Thread(target=poller, args=(base, paths, stop, latencies))
+                for _ in range(4)
+            ]
+            for th in threads + pollers:
+                th.start()
+            for th in threads:
+                th.join()
+            stop.set()
+            for th in pollers:
+                th.join()
+            client.post(f"/api/runs/{live['id']}/cancel")
+            rates = [c / args.live_seconds for c in counts]
+            lat_ms = sorted(1000 * x for x in latencies)
+            result |= {
+                "viewers": args.viewers,
+                "frames_per_s_per_viewer_min": round(min(rates), 1),
+                "frames_per_s_per_viewer_mean": round(statistics.mean(rates), 1),
+                "frames_per_s_total": round(sum(rates), 1),
+                "api_requests": len(lat_ms),
+                "api_p50_ms": round(lat_ms[len(lat_ms) // 2], 1),
+                "api_p99_ms": round(lat_ms[int(0.99 * (len(lat_ms) - 1))], 1),
+            }
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(timeout=60)
+    if args.json:
+        print(json.dumps(result))
+    else:
+        for key, value in result.items():
+            print(f"{key:<32} {value}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,91 @@
+"""Builders and waiting helpers for the service tests."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+from fastapi.testclient import TestClient
+
+from app.config import Settings
+from estimation.table import Axis, Table
+
+U1 = [500.0, 1500.0, 2500.0, 3500.0]
+U2 = [0.0, 20.0, 40.0, 60.0]
+TRUE_MAP = Table(
+    [Axis("u1", "rpm", U1), Axis("u2", "mg/stroke", U2)],
+    np.add.outer(np.array([1.0, 2.0, 3.5, 3.0]), np.array([0.0, 0.5, 1.5, 1.0])),
+)
+TABLE = {"axes": [{"name": "u1", "breakpoints": U1}, {"name": "u2", "breakpoints": U2}]}
+FINISHED = ("succeeded", "failed", "cancelled", "interrupted")
+
+
+def log_csv(n: int = 3000, seed: int = 0, rate_hz: float = 50.0) -> str:
+    """A 2-D map log: ``time [s], u1 [rpm], u2 [mg/stroke], y [ppm], temp [degC]``."""
+    rng = np.random.default_rng(seed)
+    u = np.column_stack([rng.uniform(400, 3600, n), rng.uniform(-5, 65, n)])
+    y = TRUE_MAP.evaluate(u) + rng.normal(0.0, 0.05, n)
+    temp = 60.0 + 40.0 * np.sin(np.arange(n) / 300.0)
+    rows = ["time [s],u1 [rpm],u2 [mg/stroke],y [ppm],temp [degC]"]
+    columns = np.column_stack([np.arange(n) / rate_hz, u, y, temp])
+    rows += [",".join(repr(float(v)) for v in row) for row in columns]
+    return "\n".join(rows) + "\n"
+
+
+def upload(client: TestClient, text: str | bytes, name: str = "log.csv", **form: str) -> Any:
+    content = text.encode() if isinstance(text, str) else text
+    return client.post("/api/datasets", files={"file": (name, content)}, data=form)
+
+
+def upload_ok(client: TestClient, text: str | bytes, name: str = "log.csv") -> dict[str, Any]:
+    response = upload(client, text, name)
+    assert response.status_code == 201, response.text
+    return response.json()
+
+
+def run_body(dataset_id: int, estimator: str = "skf", **config: Any) -> dict[str, Any]:
+    base = {"sigma_w": 0.01, "sigma_v": 0.05, "p0": 10.0} if estimator in ("kf", "skf") else {}
+    return {
+        "dataset_id": dataset_id,
+        "estimator": estimator,
+        "signals": {"y": "y"},
+        "table": TABLE,
+        "config": base | config,
+    }
+
+
+def start_run(client: TestClient, body: dict[str, Any]) -> dict[str, Any]:
+    response = client.post("/api/runs", json=body)
+    assert response.status_code == 201, response.text
+    return response.json()
+
+
+def wait_run(
+    client: TestClient, run_id: int, *, timeout: float = 120.0, until: tuple[str, ...] = FINISHED
+) -> dict[str, Any]:
+    deadline = time.monotonic() + timeout
+    while True:
+        run = client.get(f"/api/runs/{run_id}").json()
+        if run["status"] in until:
+            return run
+        if time.monotonic() > deadline:
+            raise AssertionError(f"run {run_id} still {run['status']} after {timeout} s")
+        time.sleep(0.05)
+
+
+def final_values(client: TestClient, run_id: int) -> dict[str, Any]:
+    response = client.get(f"/api/runs/{run_id}/export", params={"format": "json"})
+    assert response.status_code == 200, response.text
+    return response.json()
+
+
+def service_settings(database_url: str, **overrides: object) -> Settings:
+    """Settings of a test app: 2 run workers, no demo, fast cancel polling."""
+    base: dict[str, object] = {
+        "database_url": database_url,
+        "run_workers": 2,
+        "seed_demo": False,
+        "cancel_poll_s": 0.05,
+    }
+    return Settings(**(base | overrides))

@@ -1,0 +1,363 @@
+"""The minimal REST contract, through the real app, on SQLite and PostgreSQL:
+upload → run → poll → export, and the export equals ``mapwise adapt`` on the same CSV."""
+
+from __future__ import annotations
+
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from app.cli import main as cli_main
+from tests.app.service.helpers import (
+    TABLE,
+    TRUE_MAP,
+    U1,
+    U2,
+    final_values,
+    log_csv,
+    run_body,
+    start_run,
+    upload,
+    upload_ok,
+    wait_run,
+)
+
+SPEED = [750, 780, 1000, 1250, 1500, 1750, 2000, 2500, 3000, 3500, 4000, 4500]
+FUEL = [0, 5, 10, 15, 20, 25, 30, 34, 38, 42, 46, 50, 55, 60, 65, 70, 75, 80]
+
+
+def test_health_names_backend_and_revision(client: TestClient, backend: str) -> None:
+    body = client.get("/api/health").json()
+    assert body["status"] == "ok"
+    assert body["database"] == backend
+    assert body["revision"] == "0002"
+
+
+def test_upload_returns_the_contract_fields(client: TestClient) -> None:
+    response = upload(client, log_csv(500), name="drive.csv")
+    assert response.status_code == 201, response.text
+    doc = response.json()
+    assert {"id", "name", "rows", "channels"} <= set(doc)
+    assert doc["name"] == "drive.csv"
+    assert doc["rows"] == 500
+    assert doc["channels"] == [
+        {"name": "u1", "unit": "rpm"},
+        {"name": "u2", "unit": "mg/stroke"},
+        {"name": "y", "unit": "ppm"},
+        {"name": "temp", "unit": "degC"},
+    ]
+    assert doc["rate_hz"] == pytest.approx(50.0)
+    assert client.get(f"/api/datasets/{doc['id']}").json() == doc
+
+
+def test_upload_name_and_units_fields(client: TestClient) -> None:
+    text = "time,a,b\n0,1,2\n1,2,3\n2,3,4\n"
+    response = upload(client, text, name="../../etc/passwd", units=json.dumps({"a": "bar"}))
+    assert response.status_code == 201, response.text
+    doc = response.json()
+    assert doc["name"] == "passwd"  # a client filename is a label, never a path
+    assert doc["channels"] == [{"name": "a", "unit": "bar"}, {"name": "b", "unit": ""}]
+    response = client.post(
+        "/api/datasets", files={"file": ("x.csv", text.encode())}, data={"name": "My log"}
+    )
+    assert response.json()["name"] == "My log"
+
+
+@pytest.mark.parametrize("estimator", ["kf", "skf", "sskf", "rls", "nlms"])
+def test_export_json_equals_mapwise_adapt(
+    client: TestClient,
+    estimator: str,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    text = log_csv(2000, seed=3)
+    path = tmp_path / "log.csv"
+    path.write_text(text)
+    dataset = upload_ok(client, text)
+    options = {"sigma_v": 0.05}
+    if estimator in ("kf", "skf"):
+        options |= {"sigma_w": 0.01, "p0": 10.0}
+    run = start_run(
+        client,
+        {
+            "dataset_id": dataset["id"],
+            "estimator": estimator,
+            "signals": {"y": "y"},
+            "table": TABLE,
+            "config": options,
+        },
+    )
+    assert {"id", "status"} <= set(run)
+    assert run["status"] == "queued"
+    done = wait_run(client, run["id"])
+    assert {"id", "status", "progress", "error"} <= set(done)
+    assert (done["status"], done["progress"], done["error"]) == ("succeeded", 1.0, None)
+
+    flags = [f"--{k.replace('_', '-')}={v}" for k, v in options.items()]
+    axes = ["--axis", "u1=" + ",".join(map(str, U1)), "--axis", "u2=" + ",".join(map(str, U2))]
+    assert (
+        cli_main(
+            ["adapt", str(path), "--estimator", estimator, *axes, "--y", "y", *flags, "--json"]
+        )
+        == 0
+    )
+    expected = json.loads(capsys.readouterr().out)
+    got = final_values(client, run["id"])
+    expected.pop("timing")
+    got.pop("timing")
+    assert got == expected
+    if estimator in ("kf", "skf"):
+        assert np.max(np.abs(np.array(got["values"]) - TRUE_MAP.values)) < 0.15
+
+
+def test_nox_demo_config_with_sensor_delay_equals_mapwise_adapt(
+    client: TestClient, example_csv: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    dataset = upload_ok(client, example_csv.read_bytes(), name="example_nox.csv")
+    config = {
+        "sigma_w": 15,
+        "sigma_v": 25,
+        "p0": 10000,
+        "sensor": {"lag": 0.96, "delay_s": 0.75, "sigma_f": 50},
+        "version_every": {"seconds": 30},
+    }
+    table = {
+        "axes": [
+            {"name": "speed_rpm", "breakpoints": SPEED},
+            {"name": "fuel_mg_per_stroke", "breakpoints": FUEL},
+        ]
+    }
+    body = {"dataset_id": dataset["id"], "estimator": "skf", "signals": {"y": "nox_ppm"}}
+    run = start_run(client, body | {"table": table, "config": config})
+    assert wait_run(client, run["id"])["status"] == "succeeded"
+    args = [
+        "adapt", str(example_csv), "--estimator", "skf",
+        "--axis", "speed_rpm=" + ",".join(map(str, SPEED)),
+        "--axis", "fuel_mg_per_stroke=" + ",".join(map(str, FUEL)),
+        "--y", "nox_ppm", "--sigma-w", "15", "--sigma-v", "25", "--p0", "10000",
+        "--lag", "0.96", "--delay-s", "0.75", "--sigma-f", "50", "--time", "time", "--json",
+    ]  # fmt: skip
+    assert cli_main(args) == 0
+    expected = json.loads(capsys.readouterr().out)
+    got = final_values(client, run["id"])
+    assert {k: v for k, v in got.items() if k != "timing"} == {
+        k: v for k, v in expected.items() if k != "timing"
+    }
+    assert got["rejected"]["delay"] == 38
+    versions = client.get(f"/api/runs/{run['id']}/versions").json()["items"]
+    # every 30 s of a 150 s log at 50 Hz: 1500, 3000, 4500, 6000 samples, then the final one
+    assert [v["final"] for v in versions] == [False] * (len(versions) - 1) + [True]
+    assert len(versions) >= 5
+    assert versions[-1]["step"] == 7500
+
+
+def test_run_document_versions_series_cells(client: TestClient) -> None:
+    dataset = upload_ok(client, log_csv(3000, seed=1))
+    run = start_run(client, run_body(dataset["id"], version_every={"samples": 1000}))
+    done = wait_run(client, run["id"])
+    assert done["status"] == "succeeded"
+    assert done["n_versions"] == 3
+    assert done["metrics"]["samples"] == 3000
+    assert 0.04 < done["metrics"]["output_rmse"] < 0.3  # noise 0.05 plus the transient from θ0 = 0
+    assert done["rejected"] == {"mask": 0, "innovation": 0, "delay": 0}
+    versions = client.get(f"/api/runs/{run['id']}/versions").json()["items"]
+    assert [v["step"] for v in versions] == [1000, 2000, 3000]
+    first = client.get(f"/api/runs/{run['id']}/versions/{versions[0]['id']}").json()
+    last = client.get(f"/api/runs/{run['id']}/versions/{versions[-1]['id']}").json()
+    assert np.array(first["values"]).shape == (4, 4)
+    assert first["values"] != last["values"]
+    assert np.all(np.array(last["variances"]) > 0)
+    assert np.sum(last["visits"]) == pytest.approx(3000)
+    assert np.sum(first["visits"]) == pytest.approx(1000)
+    patched = client.patch(
+        f"/api/runs/{run['id']}/versions/{versions[0]['id']}", json={"label": "early"}
+    )
+    assert patched.status_code == 200
+    assert patched.json()["label"] == "early"
+
+    series = client.get(f"/api/runs/{run['id']}/series", params={"points": 500}).json()
+    assert len(series["time"]) == 500
+    assert set(series["series"]) == {"u1", "u2", "measured", "prediction", "residual"}
+    assert series["series"]["measured"]["unit"] == "ppm"
+    assert all(len(s["values"]) == 500 for s in series["series"].values())
+
+    cells = client.get(f"/api/runs/{run['id']}/cells").json()
+    assert cells["visits"] == last["visits"]
+    assert cells["rejected"]["innovation"] == np.zeros((4, 4)).tolist()
+
+
+def test_exports_csv_dcm_mcap(client: TestClient) -> None:
+    from mcap.reader import make_reader
+
+    dataset = upload_ok(client, log_csv(1500, seed=2))
+    run = start_run(client, run_body(dataset["id"], version_every={"samples": 500}))
+    assert wait_run(client, run["id"])["status"] == "succeeded"
+    doc = final_values(client, run["id"])
+    url = f"/api/runs/{run['id']}/export"
+
+    csv_text = client.get(url, params={"format": "csv"}).text
+    lines = csv_text.strip().splitlines()
+    assert lines[0].startswith("u1 [rpm] \\ u2 [mg/stroke],")
+    assert [float(x) for x in lines[1].split(",")][1:] == doc["values"][0]
+
+    series_csv = client.get(url, params={"format": "csv", "part": "series"})
+    assert series_csv.headers["content-type"].startswith("text/csv")
+    header = series_csv.text.splitlines()[0]
+    assert header.startswith("time [s],u1 [rpm],u2 [mg/stroke],y [ppm]")
+    assert len(series_csv.text.splitlines()) == 1501
+
+    dcm = client.get(url, params={"format": "dcm"})
+    assert "KENNFELD Y 4 4" in dcm.text
+    assert 'filename="' in dcm.headers["content-disposition"]
+
+    mcap = client.get(url, params={"format": "mcap"})
+    reader = make_reader(io.BytesIO(mcap.content))
+    topics: dict[str, int] = {}
+    last_map = None
+    for _schema, channel, message in reader.iter_messages():
+        topics[channel.topic] = topics.get(channel.topic, 0) + 1
+        if channel.topic == "/map":
+            last_map = json.loads(message.data)
+    assert topics == {"/signals": 1500, "/map": 3}
+    assert last_map is not None
+    assert np.reshape(last_map["values"], last_map["shape"]).tolist() == doc["values"]
+
+
+def test_compare_and_lists_paginate(client: TestClient) -> None:
+    dataset = upload_ok(client, log_csv(800, seed=4))
+    ids = [start_run(client, run_body(dataset["id"], e))["id"] for e in ("skf", "nlms", "rls")]
+    for run_id in ids:
+        assert wait_run(client, run_id)["status"] == "succeeded"
+    compared = client.get("/api/compare", params={"runs": ",".join(map(str, ids))}).json()
+    assert [r["id"] for r in compared["runs"]] == ids
+    assert all(r["final_version"]["final"] for r in compared["runs"])
+    assert compared["runs"][1]["final_version"]["variances"] is None  # nlms has none
+    page = client.get("/api/runs", params={"dataset_id": dataset["id"], "limit": 2}).json()
+    assert (page["total"], page["limit"], page["offset"], len(page["items"])) == (3, 2, 0, 2)
+    rest = client.get(
+        "/api/runs", params={"dataset_id": dataset["id"], "limit": 2, "offset": 2}
+    ).json()
+    assert [r["id"] for r in page["items"] + rest["items"]] == sorted(ids, reverse=True)
+    datasets = client.get("/api/datasets", params={"limit": 1}).json()
+    assert datasets["limit"] == 1
+    assert len(datasets["items"]) == 1
+    assert datasets["total"] >= 1
+
+
+def test_error_bodies(client: TestClient) -> None:
+    def error(response, status: int) -> dict:  # type: ignore[no-untyped-def]
+        assert response.status_code == status, response.text
+        body = response.json()
+        assert set(body) == {"error"}
+        assert set(body["error"]) == {"code", "message", "field"}
+        return body["error"]
+
+    assert error(client.get("/api/runs/987654"), 404)["code"] == "not_found"
+    assert error(client.get("/api/no/such/route"), 404)["code"] == "not_found"
+    assert error(client.put("/api/runs"), 405)["code"] == "method_not_allowed"
+    bad_json = client.post("/api/runs", content=b"{", headers={"content-type": "application/json"})
+    assert error(bad_json, 400)["code"] == "validation_error"
+    dataset = upload_ok(client, log_csv(300))
+    body = run_body(dataset["id"])
+    assert error(client.post("/api/runs", json=body | {"estimator": "zzz"}), 422)["field"] == (
+        "estimator"
+    )
+    e = error(client.post("/api/runs", json=body | {"signals": {"y": "nope"}}), 422)
+    assert e["field"] == "signals.y"
+    assert "nope" in e["message"]
+    e = error(client.post("/api/runs", json=body | {"config": {"sigma_v": -1}}), 422)
+    assert e["field"] == "config.sigma_v"
+    bad_axes = {"axes": [{"name": "u1", "breakpoints": [3, 1]}, TABLE["axes"][1]]}
+    e = error(client.post("/api/runs", json=body | {"table": bad_axes}), 422)
+    assert e["field"] == "table.axes[0].breakpoints"
+    e = error(client.post("/api/runs", json=body | {"config": {"pace": -2}}), 422)
+    assert e["field"] == "config.pace"
+    e = error(client.post("/api/runs", json=body | {"dataset_id": 999999}), 404)
+    assert e["field"] == "dataset_id"
+    e = error(client.post("/api/runs", json={"estimator": "skf"}), 422)
+    assert e["field"] == "dataset_id"
+    e = error(client.get("/api/runs/1/export", params={"format": "xls"}), 422)
+    assert e["field"] == "format"
+
+
+def test_delete_dataset_conflicts_then_forces(client: TestClient) -> None:
+    dataset = upload_ok(client, log_csv(300))
+    run = start_run(client, run_body(dataset["id"]))
+    wait_run(client, run["id"])
+    response = client.delete(f"/api/datasets/{dataset['id']}")
+    assert response.status_code == 409
+    assert response.json()["error"]["code"] == "conflict"
+    assert (
+        client.delete(f"/api/datasets/{dataset['id']}", params={"force": True}).status_code == 204
+    )
+    assert client.get(f"/api/datasets/{dataset['id']}").status_code == 404
+    assert client.get(f"/api/runs/{run['id']}").status_code == 404
+
+
+def test_catalogs(client: TestClient) -> None:
+    estimators = {e["name"]: e for e in client.get("/api/estimators").json()["items"]}
+    assert {"kf", "skf", "sskf", "rls", "nlms", "lpv", "uio"} <= set(estimators)
+    skf = estimators["skf"]
+    assert skf["kind"] == "table-filter"
+    assert skf["needs_table"]
+    assert [s["role"] for s in skf["signals"]] == ["y"]
+    assert "sigma_w" in skf["config_schema"]["properties"]
+    assert "axes" not in skf["config_schema"]["properties"]
+    assert skf["defaults"]["sigma_v"] == 1.0
+    assert estimators["uio"]["kind"] == "torque"
+    assert not estimators["uio"]["needs_table"]
+    scenarios = {s["name"]: s for s in client.get("/api/scenarios").json()["items"]}
+    assert scenarios["skf-sim1"]["rate_hz"] == 1.0
+    assert "skf" in scenarios["skf-sim1"]["estimators"]
+
+
+def test_openapi_documents_every_route(client: TestClient) -> None:
+    spec = client.get("/openapi.json").json()
+    paths = spec["paths"]
+    for path in (
+        "/api/health",
+        "/api/datasets",
+        "/api/datasets/simulate",
+        "/api/datasets/{dataset_id}/preview",
+        "/api/runs",
+        "/api/runs/{run_id}",
+        "/api/runs/{run_id}/cancel",
+        "/api/runs/{run_id}/resume",
+        "/api/runs/{run_id}/versions/{version_id}",
+        "/api/runs/{run_id}/series",
+        "/api/runs/{run_id}/cells",
+        "/api/runs/{run_id}/export",
+        "/api/compare",
+        "/api/base-maps",
+    ):
+        assert path in paths, path
+    assert "422" in paths["/api/runs"]["post"]["responses"]
+
+
+def test_csv_export_neutralises_spreadsheet_formulas(client: TestClient) -> None:
+    rng = np.random.default_rng(0)
+    rows = ["time,=HYPERLINK(1),y"] + [
+        f"{k * 0.1},{rng.uniform(0, 10)!r},{rng.uniform(0, 1)!r}" for k in range(300)
+    ]
+    dataset = upload_ok(client, "\n".join(rows) + "\n")
+    body = {
+        "dataset_id": dataset["id"],
+        "estimator": "nlms",
+        "signals": {"y": "y"},
+        "table": {"axes": [{"name": "=HYPERLINK(1)", "breakpoints": [0, 5, 10]}]},
+        "config": {},
+    }
+    run = start_run(client, body)
+    assert wait_run(client, run["id"])["status"] == "succeeded"
+    text = client.get(f"/api/runs/{run['id']}/export", params={"format": "csv"}).text
+    first_cells = [line.split(",")[0] for line in text.splitlines()]
+    assert first_cells[0].startswith("'=HYPERLINK(1)")
+    assert not any(cell.startswith(("=", "+", "@")) for cell in first_cells)
+    series = client.get(
+        f"/api/runs/{run['id']}/export", params={"format": "csv", "part": "series"}
+    ).text
+    assert "'=HYPERLINK(1)" in series.splitlines()[0]

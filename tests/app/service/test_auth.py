@@ -1,0 +1,95 @@
+"""Bearer tokens (created, listed and revoked with the CLI), required beyond loopback or when
+asked; CORS closed by default. SQLite and PostgreSQL."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import pytest
+from fastapi.testclient import TestClient
+from pydantic import ValidationError
+from starlette.websockets import WebSocketDisconnect
+
+from app.api import create_app
+from app.cli import main as cli_main
+from app.config import Settings
+from tests.app.service.helpers import service_settings
+
+
+@pytest.fixture(scope="module")
+def secured(backend: str, fresh_url) -> Iterator[tuple[TestClient, str]]:  # type: ignore[no-untyped-def]
+    url = fresh_url(backend)
+    settings = service_settings(url, require_auth=True)
+    with TestClient(create_app(settings, execute_runs=False)) as client:
+        yield client, url
+
+
+def _cli(args: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
+    code = cli_main(args)
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_tokens_gate_every_api_route(
+    secured: tuple[TestClient, str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    client, url = secured
+    response = client.get("/api/datasets")
+    assert response.status_code == 401
+    assert response.json()["error"]["code"] == "unauthorized"
+    assert response.headers["www-authenticate"] == "Bearer"
+    assert client.get("/api/health").status_code == 200  # liveness stays open
+
+    code, out, _ = _cli(["token", "create", "--name", "ci", "--database-url", url], capsys)
+    assert code == 0
+    secret = out.strip()
+    assert secret.startswith("mw_")
+    auth = {"Authorization": f"Bearer {secret}"}
+    assert client.get("/api/datasets", headers=auth).status_code == 200
+    bad = {"Authorization": f"Bearer {secret}x"}
+    assert client.get("/api/datasets", headers=bad).status_code == 401
+
+    code, out, _ = _cli(["token", "list", "--database-url", url], capsys)
+    assert code == 0
+    assert "ci" in out
+    assert secret not in out  # never shown again
+    token_id = out.split()[0]
+    code, _, _ = _cli(["token", "revoke", token_id, "--database-url", url], capsys)
+    assert code == 0
+    assert client.get("/api/datasets", headers=auth).status_code == 401
+
+
+def test_websocket_needs_the_token_too(secured: tuple[TestClient, str]) -> None:
+    client, _ = secured
+    with (
+        pytest.raises(WebSocketDisconnect) as closed,
+        client.websocket_connect("/api/runs/1/stream") as ws,
+    ):
+        ws.receive_json()
+    assert closed.value.code == 1008
+
+
+def test_auth_is_required_beyond_loopback() -> None:
+    assert not Settings(host="127.0.0.1").auth_required
+    assert not Settings(host="localhost").auth_required
+    assert Settings(host="0.0.0.0").auth_required
+    assert Settings(host="192.168.1.20").auth_required
+    assert Settings(host="127.0.0.1", require_auth=True).auth_required
+    with pytest.raises(ValidationError, match="beyond loopback"):
+        Settings(host="0.0.0.0", require_auth=False)
+
+
+def test_cors_is_closed_by_default(client: TestClient) -> None:
+    headers = {"Origin": "https://evil.example", "Access-Control-Request-Method": "GET"}
+    response = client.options("/api/datasets", headers=headers)
+    assert "access-control-allow-origin" not in response.headers
+    response = client.get("/api/health", headers={"Origin": "https://evil.example"})
+    assert "access-control-allow-origin" not in response.headers
+
+
+def test_cors_origins_can_be_opened(database_url: str) -> None:
+    settings = service_settings(database_url, cors_origins=["https://dash.example"])
+    with TestClient(create_app(settings, execute_runs=False)) as client:
+        headers = {"Origin": "https://dash.example", "Access-Control-Request-Method": "GET"}
+        response = client.options("/api/datasets", headers=headers)
+        assert response.headers["access-control-allow-origin"] == "https://dash.example"
