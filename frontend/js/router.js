@@ -1,0 +1,136 @@
+/**
+ * History-API router: every view has its own URL and a reload lands on the same view.
+ * A view module exports `title` and `mount(root, ctx)`; mount may return a cleanup function.
+ * ctx = {params, query, signal, navigate}; `signal` aborts when the view is left.
+ */
+import { SEL } from "./constants.js";
+
+export class Router {
+  /** @param {{path: RegExp, keys?: string[], view?: object, redirect?: string}[]} routes */
+  constructor(routes, root, { onChange } = {}) {
+    this.routes = routes;
+    this.root = root;
+    this.onChange = onChange;
+    this.cleanup = null;
+    this.controller = null;
+    this.current = null;
+    this.rendered = 0;
+  }
+
+  start() {
+    window.addEventListener("popstate", () => this.render());
+    document.addEventListener("click", (event) => this.intercept(event));
+    return this.render();
+  }
+
+  /** Follow same-origin links to app routes without a page load. */
+  intercept(event) {
+    if (event.defaultPrevented || event.button !== 0) return;
+    if (event.metaKey || event.ctrlKey || event.shiftKey || event.altKey) return;
+    const a = event.target.closest?.("a[href]");
+    if (!a || a.target || a.hasAttribute("download")) return;
+    const dest = new URL(a.href, window.location.href);
+    if (dest.origin !== window.location.origin || dest.pathname.startsWith("/api/") ||
+        dest.pathname.startsWith("/static/")) return;
+    if (!this.match(dest.pathname)) return;
+    event.preventDefault();
+    this.navigate(dest.pathname + dest.search);
+  }
+
+  match(pathname) {
+    for (const route of this.routes) {
+      const m = route.path.exec(pathname);
+      if (m) {
+        const params = Object.fromEntries((route.keys ?? []).map((k, i) => [k, decodeURIComponent(m[i + 1])]));
+        return { route, params };
+      }
+    }
+    return null;
+  }
+
+  /** Go to `to` (path + query). replace=true rewrites the current history entry. */
+  navigate(to, { replace = false } = {}) {
+    const current = window.location.pathname + window.location.search;
+    if (to !== current) {
+      if (replace) history.replaceState(null, "", to);
+      else history.pushState(null, "", to);
+    }
+    return this.render();
+  }
+
+  /** Update the query string of the current view without re-mounting it. */
+  setQuery(query, { replace = true } = {}) {
+    const params = new URLSearchParams();
+    for (const [k, v] of Object.entries(query)) {
+      if (v !== undefined && v !== null && v !== "") params.set(k, v);
+    }
+    const search = params.toString();
+    const to = window.location.pathname + (search ? `?${search.replaceAll("%2C", ",").replaceAll("%3A", ":")}` : "");
+    if (replace) history.replaceState(null, "", to);
+    else history.pushState(null, "", to);
+  }
+
+  async render() {
+    const { pathname, search } = window.location;
+    const found = this.match(pathname);
+    if (found?.route.redirect) return this.navigate(found.route.redirect, { replace: true });
+
+    this.controller?.abort();
+    try {
+      this.cleanup?.();
+    } catch (err) {
+      console.warn("view cleanup failed", err);
+    }
+    this.cleanup = null;
+    this.controller = new AbortController();
+    this.root.replaceChildren();
+
+    const view = found?.route.view ?? notFound;
+    this.current = { view, params: found?.params ?? {}, path: pathname };
+    document.title = `${view.title ?? "mapwise"} · mapwise`;
+    this.onChange?.(found?.route.section ?? null, this.current);
+    const ctx = {
+      params: found?.params ?? {},
+      query: new URLSearchParams(search),
+      signal: this.controller.signal,
+      navigate: (to, opts) => this.navigate(to, opts),
+      setQuery: (q, opts) => this.setQuery(q, opts),
+    };
+    try {
+      const cleanup = await view.mount(this.root, ctx);
+      if (ctx.signal.aborted) cleanup?.();
+      else this.cleanup = cleanup ?? null;
+    } catch (err) {
+      if (err?.name === "AbortError") return;
+      console.warn(err);
+      this.root.replaceChildren(errorPanel(err));
+    }
+    // Move focus to the new page's heading after in-app navigation (not on first load,
+    // where the browser's own start of the page is right for keyboard and screen readers).
+    if (!ctx.signal.aborted && this.rendered++ > 0) {
+      const heading = this.root.querySelector("[data-page-title]") || document.querySelector(SEL.main);
+      heading?.focus({ preventScroll: true });
+    }
+  }
+}
+
+function errorPanel(err) {
+  const p = document.createElement("div");
+  p.className = "banner error";
+  p.setAttribute("role", "alert");
+  p.textContent = err?.status === 404 ? `Not found: ${err.message}` : `Something went wrong: ${err?.message ?? err}`;
+  return p;
+}
+
+const notFound = {
+  title: "Not found",
+  mount(root) {
+    const h1 = document.createElement("h1");
+    h1.textContent = "Page not found";
+    h1.tabIndex = -1;
+    h1.dataset.pageTitle = "";
+    const p = document.createElement("p");
+    p.innerHTML = 'Nothing lives at this address. Go to <a href="/datasets">Datasets</a>.';
+    root.append(h1, p);
+  },
+};

@@ -1,0 +1,201 @@
+/**
+ * The versions timeline of a run: a slider over the stored map versions (plus "live" while
+ * the run goes on), a play button that steps through them, the label of the version shown
+ * and "save as base map". It fetches versions itself and hands each one to onShow.
+ */
+import { api, showError } from "./api.js";
+import { fmt, fmtInt, h, icon, ICONS, toast } from "./dom.js";
+
+const PLAY_STEP_MS = 650;
+const PLAY_TOTAL_MS = 8000;
+
+export class VersionTimeline {
+  /**
+   * @param {object} opts
+   * @param {number} opts.runId
+   * @param {() => boolean} opts.isLive     whether the run is still going
+   * @param {(doc: object, version: object, how: {quiet: boolean}) => void} opts.onShow
+   * @param {() => void} opts.onLive        back to the live frames
+   * @param {(versions: object[]) => void} [opts.onList]
+   * @param {() => string} opts.baseMapName name for "save as base map"
+   */
+  constructor({ runId, isLive, onShow, onLive, onList, baseMapName }) {
+    Object.assign(this, { runId, isLive, onShow, onLive, onList, baseMapName });
+    this.versions = [];
+    this.docs = new Map();
+    this.viewing = null;
+    this.playing = 0;
+
+    this.slider = h("input", { type: "range", id: "version-slider", min: "0", max: "0", value: "0", step: "1",
+      "aria-label": "Map version", "data-version-slider": "" });
+    this.playButton = h("button", { type: "button", class: "icon", "aria-label": "Play the map's evolution", "data-play": "",
+      onclick: () => this.togglePlay() }, icon(ICONS.play, { filled: true }));
+    this.where = h("div", { class: "where", "aria-live": "polite", "data-version-where": "" });
+    this.ticks = h("div", { class: "timeline-ticks", "aria-hidden": "true" });
+    this.liveButton = h("button", { type: "button", class: "small", hidden: true, "data-live": "",
+      onclick: () => this.backToLive() }, "Back to live");
+    this.note = h("span", { class: "viewing", hidden: true, "data-viewing": "" });
+    this.labelInput = h("input", { type: "text", id: "version-label", placeholder: "e.g. release candidate", "data-field": "label" });
+    this.labelForm = h("form", { class: "row", novalidate: true, "aria-label": "Label this version" },
+      h("label", { for: "version-label", style: { margin: 0 } }, "Label"),
+      h("div", { class: "field", style: { margin: 0, flex: 1 } }, this.labelInput),
+      h("button", { type: "submit", class: "small", "data-save-label": "" }, icon(ICONS.tag), "Save label"),
+      h("button", { type: "button", class: "small", "data-base-map": "", onclick: () => this.saveBaseMap() }, "Save as base map"));
+    this.labelForm.addEventListener("submit", (e) => {
+      e.preventDefault();
+      this.saveLabel();
+    });
+    this.slider.addEventListener("input", () => this.scrubTo(Number(this.slider.value)));
+    this.el = h("div", {},
+      h("div", { class: "timeline" }, this.playButton, h("div", {}, this.slider, this.ticks), this.where),
+      h("div", { style: { marginTop: "12px" } }, this.labelForm));
+  }
+
+  /** Fetch the version list; with nothing chosen, a finished run shows its final version. */
+  async refresh({ signal } = {}) {
+    let body;
+    try {
+      body = await api.get(`/api/runs/${this.runId}/versions`, { signal });
+    } catch {
+      return;
+    }
+    this.versions = Array.isArray(body) ? body : body.items ?? [];
+    const live = this.isLive();
+    const n = this.versions.length;
+    this.slider.max = String(live ? n : Math.max(0, n - 1));
+    this.slider.disabled = n === 0;
+    this.playButton.disabled = n < 2;
+    const span = Math.max(1, Number(this.slider.max));
+    this.ticks.replaceChildren(...this.versions.map((v, k) => h("span", {
+      class: v.label ? "labelled" : null, title: v.label ?? "", style: { left: `calc(${(100 * k) / span}% - 1px)` } })));
+    this.onList?.(this.versions);
+    if (!this.viewing) {
+      this.slider.value = this.slider.max;
+      if (!live && n) await this.scrubTo(n - 1, { quiet: true });
+      else this.describe();
+    }
+  }
+
+  describe() {
+    const k = Number(this.slider.value);
+    const v = this.versions[k];
+    if (!v) {
+      this.where.textContent = this.isLive() ? `live · ${this.versions.length} version(s) so far` : "no versions";
+      return;
+    }
+    this.where.textContent = `version ${k + 1} of ${this.versions.length} · t = ${fmt(v.time_s, 4)} s · step ${fmtInt(v.step)}` +
+      (v.final ? " · final" : "") + (v.label ? ` · “${v.label}”` : "");
+  }
+
+  doc(v) {
+    if (!this.docs.has(v.id)) {
+      const load = api.get(`/api/runs/${this.runId}/versions/${v.id}`).catch((err) => {
+        this.docs.delete(v.id);
+        throw err;
+      });
+      this.docs.set(v.id, load);
+    }
+    return this.docs.get(v.id);
+  }
+
+  /** Show version k (quiet: the automatic "final version" display, no "viewing" note). */
+  async scrubTo(k, { quiet = false } = {}) {
+    const v = this.versions[k];
+    const live = this.isLive();
+    if (!v) {
+      if (live) this.backToLive();
+      return;
+    }
+    this.slider.value = String(k);
+    let doc;
+    try {
+      doc = await this.doc(v);
+    } catch (err) {
+      showError(this.labelForm, err);
+      return;
+    }
+    if (Number(this.slider.value) !== k) return; // the user moved on meanwhile
+    this.viewing = { ...v, doc };
+    this.labelInput.value = v.label ?? "";
+    const noted = live || !v.final;
+    this.note.hidden = !noted;
+    this.note.textContent = noted ? `viewing version ${k + 1}` : "";
+    this.liveButton.hidden = !live;
+    this.describe();
+    this.onShow(doc, v, { quiet });
+  }
+
+  /** Redraw what is shown (e.g. after a theme change). */
+  reshow() {
+    if (this.viewing) this.scrubTo(Number(this.slider.value), { quiet: true });
+  }
+
+  backToLive() {
+    this.stopPlay();
+    this.viewing = null;
+    this.note.hidden = true;
+    this.liveButton.hidden = true;
+    this.slider.value = this.slider.max;
+    this.describe();
+    this.onLive();
+  }
+
+  togglePlay() {
+    if (this.playing) return this.stopPlay();
+    const n = this.versions.length;
+    if (n < 2) return undefined;
+    let k = Number(this.slider.value) >= n - 1 ? 0 : Number(this.slider.value);
+    this.playButton.replaceChildren(icon(ICONS.pause, { filled: true }));
+    this.playButton.setAttribute("aria-label", "Pause");
+    const step = async () => {
+      await this.scrubTo(k);
+      k += 1;
+      if (k >= n) return this.stopPlay();
+      this.playing = setTimeout(step, Math.max(120, Math.min(PLAY_STEP_MS, PLAY_TOTAL_MS / n)));
+      return undefined;
+    };
+    this.playing = setTimeout(step, 0);
+    return undefined;
+  }
+
+  stopPlay() {
+    clearTimeout(this.playing);
+    this.playing = 0;
+    this.playButton.replaceChildren(icon(ICONS.play, { filled: true }));
+    this.playButton.setAttribute("aria-label", "Play the map's evolution");
+  }
+
+  /** The version the label and "save as base map" act on: the one shown, else the latest. */
+  current() {
+    return this.viewing ?? this.versions.at(-1) ?? null;
+  }
+
+  async saveLabel() {
+    const v = this.current();
+    if (!v) return;
+    try {
+      const updated = await api.patch(`/api/runs/${this.runId}/versions/${v.id}`, { label: this.labelInput.value.trim() || null });
+      toast(updated.label ? `Version labelled “${updated.label}”.` : "Label removed.");
+      if (this.viewing?.id === v.id) this.viewing = { ...this.viewing, label: updated.label };
+      await this.refresh();
+      this.describe();
+    } catch (err) {
+      showError(this.labelForm, err);
+    }
+  }
+
+  async saveBaseMap() {
+    const v = this.current();
+    if (!v) return;
+    try {
+      const map = await api.post("/api/base-maps", { run_id: this.runId, version_id: v.id, name: `${this.baseMapName()} v${v.step}` });
+      toast(`Saved base map #${map.id} “${map.name}”.`);
+    } catch (err) {
+      showError(this.labelForm, err);
+    }
+  }
+
+  destroy() {
+    this.stopPlay();
+  }
+}

@@ -1,0 +1,444 @@
+/**
+ * Datasets: upload a log (drag and drop, progress, units per column), simulate a scenario,
+ * list and delete datasets, preview every channel with its unit, and map columns to the
+ * signals an estimator needs before starting a run.
+ */
+import { api, clearErrors, estimators, scenarios, showError } from "../api.js";
+import { EVT } from "../constants.js";
+import {
+  card, clear, confirmDialog, fmt, fmtBytes, fmtDate, fmtDuration, fmtInt, h, icon, ICONS, pageHead,
+  splitHeader, toast, withUnit,
+} from "../dom.js";
+import { encodeSignals, guessColumn, guessTable, KIND_TITLES, needsTable, rolesOf } from "../mapping.js";
+import { axis, baseLayout, purge, react, STATIC_CONFIG, theme } from "../plot.js";
+
+export const title = "Datasets";
+
+const PREVIEW_POINTS = 400;
+
+export async function mount(root, ctx) {
+  const state = { datasets: [], selected: Number(ctx.query.get("id")) || null, plots: [] };
+  const list = h("div", { "data-dataset-list": "" }, h("div", { class: "loading" }, "Loading datasets…"));
+  const preview = h("div", { class: "stack", "data-dataset-preview": "" });
+
+  root.append(
+    pageHead({
+      title: "Datasets",
+      sub: "Bring a drive log or simulate a cycle with known truth, then map its columns to an estimator.",
+    }),
+    h(
+      "div",
+      { class: "grid side-l" },
+      h("div", { class: "stack" }, uploadCard(ctx, onCreated), simulateCard(ctx, onCreated)),
+      h("div", { class: "stack" },
+        card({ title: "Your datasets", bodyCls: "flush", body: list }),
+        preview),
+    ),
+  );
+
+  async function refresh() {
+    try {
+      state.datasets = await api.all("/api/datasets", { signal: ctx.signal });
+    } catch (err) {
+      if (err.name === "AbortError") return;
+      list.replaceChildren(h("div", { class: "banner error", role: "alert" }, err.message));
+      return;
+    }
+    renderList();
+  }
+
+  function renderList() {
+    if (!state.datasets.length) {
+      list.replaceChildren(h("div", { class: "empty" }, "No datasets yet — upload a log or simulate a scenario."));
+      return;
+    }
+    const rows = state.datasets.map((d) =>
+      h("tr", { "aria-selected": String(d.id === state.selected), dataset: { datasetId: d.id } },
+        h("td", { class: "wrap" },
+          h("button", { class: "linklike", type: "button", "data-select-dataset": d.id,
+            "aria-label": `Preview dataset ${d.name}`, onclick: () => select(d.id) }, d.name),
+          " ", h("span", { class: "tag" }, d.source)),
+        h("td", { class: "num" }, fmtInt(d.rows)),
+        h("td", { class: "num" }, `${fmt(d.rate_hz, 3)} Hz`),
+        h("td", { class: "num" }, fmtDuration(d.duration_s)),
+        h("td", { class: "num" }, String(d.channels?.length ?? 0)),
+        h("td", {}, fmtDate(d.created_at)),
+        h("td", { class: "num" },
+          h("div", { class: "row end" },
+            h("a", { class: "button small", href: `/runs/new?dataset=${d.id}`, "aria-label": `New run on ${d.name}` }, icon(ICONS.play), "New run"),
+            h("button", { class: "small danger icon", type: "button", "aria-label": `Delete dataset ${d.name}`,
+              title: "Delete", onclick: () => remove(d) }, icon(ICONS.trash)))),
+      ),
+    );
+    list.replaceChildren(
+      h("div", { class: "table-wrap" },
+        h("table", { class: "data" },
+          h("thead", {}, h("tr", {},
+            h("th", { scope: "col" }, "Name"), h("th", { scope: "col", class: "num" }, "Rows"),
+            h("th", { scope: "col", class: "num" }, "Rate"), h("th", { scope: "col", class: "num" }, "Duration"),
+            h("th", { scope: "col", class: "num" }, "Channels"), h("th", { scope: "col" }, "Created"),
+            h("th", { scope: "col", class: "num" }, h("span", { class: "visually-hidden" }, "Actions")))),
+          h("tbody", {}, rows))),
+    );
+  }
+
+  async function select(id) {
+    state.selected = id;
+    ctx.setQuery({ id });
+    renderList();
+    const dataset = state.datasets.find((d) => d.id === id) ?? (await api.get(`/api/datasets/${id}`, { signal: ctx.signal }));
+    await renderPreview(dataset);
+  }
+
+  async function renderPreview(dataset) {
+    state.plots.forEach(purge);
+    state.plots = [];
+    const channelsHost = h("div", { class: "channel-grid" }, h("div", { class: "loading" }, "Loading channels…"));
+    preview.replaceChildren(
+      card({
+        title: `Channels of “${dataset.name}”`,
+        hint: `${fmtInt(dataset.rows)} rows · ${fmt(dataset.rate_hz, 3)} Hz · ${fmtDuration(dataset.duration_s)}` +
+          (dataset.has_truth ? " · with truth" : ""),
+        body: channelsHost,
+      }),
+      await mappingCard(ctx, dataset),
+    );
+    let pv;
+    try {
+      pv = await api.get(`/api/datasets/${dataset.id}/preview`, { query: { points: PREVIEW_POINTS }, signal: ctx.signal });
+    } catch (err) {
+      if (err.name !== "AbortError") channelsHost.replaceChildren(h("div", { class: "banner error" }, err.message));
+      return;
+    }
+    clear(channelsHost);
+    for (const [name, ch] of Object.entries(pv.channels ?? {})) {
+      const values = ch.values ?? [];
+      const finite = values.filter((v) => v !== null);
+      const plot = h("div", { class: "spark", role: "img", "aria-label": `Plot of ${withUnit(name, ch.unit)} over time` });
+      channelsHost.append(
+        h("div", { class: "channel", "data-channel": name },
+          h("div", { class: "ch-head" },
+            h("span", { class: "ch-name", title: name }, name),
+            h("span", { class: "ch-unit" }, ch.unit ? `[${ch.unit}]` : "no unit")),
+          h("div", { class: "ch-range" },
+            finite.length ? `${fmt(Math.min(...finite))} … ${fmt(Math.max(...finite))}` : "no finite values"),
+          plot),
+      );
+      const draw = () => sparkline(plot, pv.time, values, ch.unit);
+      draw();
+      plot.redraw = draw;
+      state.plots.push(plot);
+    }
+  }
+
+  async function remove(dataset) {
+    const ok = await confirmDialog(`Delete “${dataset.name}” (${fmtInt(dataset.rows)} rows)? This cannot be undone.`,
+      { title: "Delete dataset", confirmLabel: "Delete", danger: true });
+    if (!ok) return;
+    try {
+      await api.del(`/api/datasets/${dataset.id}`);
+    } catch (err) {
+      if (err.code !== "conflict") return showError(root, err);
+      const force = await confirmDialog(`${err.message} Delete the dataset together with its runs and map versions?`,
+        { title: "Dataset in use", confirmLabel: "Delete everything", danger: true });
+      if (!force) return;
+      try {
+        await api.del(`/api/datasets/${dataset.id}`, { query: { force: "true" } });
+      } catch (err2) {
+        return showError(root, err2);
+      }
+    }
+    toast(`Deleted “${dataset.name}”.`);
+    if (state.selected === dataset.id) {
+      state.selected = null;
+      ctx.setQuery({});
+      preview.replaceChildren();
+    }
+    refresh();
+  }
+
+  async function onCreated(dataset) {
+    toast(`Dataset “${dataset.name}” ready: ${fmtInt(dataset.rows)} rows, ${dataset.channels?.length ?? 0} channels.`);
+    await refresh();
+    await select(dataset.id);
+  }
+
+  await refresh();
+  if (state.selected) {
+    select(state.selected).catch((err) => err.name !== "AbortError" && showError(root, err));
+  }
+  const onTheme = () => state.plots.forEach((p) => p.redraw?.());
+  window.addEventListener(EVT.themeChange, onTheme);
+  return () => {
+    window.removeEventListener(EVT.themeChange, onTheme);
+    state.plots.forEach(purge);
+  };
+}
+
+/* ---------- upload ---------- */
+
+function uploadCard(ctx, onCreated) {
+  const fileInput = h("input", { type: "file", id: "upload-file", name: "file", class: "visually-hidden",
+    accept: ".csv,.txt,.mcap,.mf4,.mdf,.dat" });
+  const nameInput = h("input", { type: "text", id: "upload-name", name: "name", placeholder: "defaults to the file name" });
+  const fileInfo = h("div", { class: "upload-file", hidden: true });
+  const columns = h("div", { "data-upload-columns": "" });
+  const bar = h("span");
+  const progress = h("div", { class: "progress", hidden: true, role: "progressbar", "aria-label": "Upload progress",
+    "aria-valuemin": "0", "aria-valuemax": "100", "aria-valuenow": "0" }, bar);
+  const submit = h("button", { type: "submit", class: "primary", disabled: true }, icon(ICONS.upload), "Upload");
+  const drop = h("label", { class: "dropzone", for: "upload-file" },
+    icon(ICONS.upload),
+    h("strong", {}, "Drop a log here or browse"),
+    h("span", { class: "help" }, "CSV with a header row (“name [unit]”), MCAP or MDF4"),
+    fileInput);
+  let file = null;
+  let units = {};
+
+  const form = h("form", { novalidate: true, "aria-label": "Upload a log" },
+    h("div", { class: "field" }, drop, fileInfo),
+    columns,
+    h("div", { class: "field" }, h("label", { for: "upload-name" }, "Dataset name"), nameInput),
+    h("div", { class: "banner error", "data-form-error": "", hidden: true }),
+    progress,
+    h("div", { class: "row end", style: { marginTop: "12px" } }, submit));
+
+  const choose = async (f) => {
+    file = f;
+    units = {};
+    clearErrors(form);
+    fileInfo.hidden = !f;
+    submit.disabled = !f;
+    columns.replaceChildren();
+    if (!f) return;
+    fileInfo.replaceChildren(h("span", { class: "name" }, f.name), h("span", { class: "ch-unit" }, fmtBytes(f.size)));
+    if (!nameInput.value) nameInput.placeholder = f.name.replace(/\.[^.]+$/, "");
+    if (/\.(csv|txt)$/i.test(f.name)) columns.append(await columnEditor(f, units));
+  };
+
+  fileInput.addEventListener("change", () => choose(fileInput.files[0] ?? null));
+  for (const type of ["dragenter", "dragover"]) {
+    drop.addEventListener(type, (e) => {
+      e.preventDefault();
+      drop.classList.add("over");
+    });
+  }
+  for (const type of ["dragleave", "drop"]) drop.addEventListener(type, () => drop.classList.remove("over"));
+  drop.addEventListener("drop", (e) => {
+    e.preventDefault();
+    const f = e.dataTransfer?.files?.[0];
+    if (f) choose(f);
+  });
+
+  form.addEventListener("submit", async (e) => {
+    e.preventDefault();
+    if (!file) return;
+    clearErrors(form);
+    const body = new FormData();
+    body.append("file", file, file.name);
+    body.append("name", nameInput.value.trim() || file.name.replace(/\.[^.]+$/, ""));
+    const given = Object.fromEntries(Object.entries(units).filter(([, u]) => u !== null));
+    if (Object.keys(given).length) body.append("units", JSON.stringify(given));
+    submit.disabled = true;
+    progress.hidden = false;
+    progress.classList.remove("ok", "bad");
+    const setProgress = (f) => {
+      bar.style.width = `${Math.round(f * 100)}%`;
+      progress.setAttribute("aria-valuenow", String(Math.round(f * 100)));
+    };
+    setProgress(0);
+    try {
+      const dataset = await api.upload("/api/datasets", body, { onProgress: setProgress, signal: ctx.signal });
+      setProgress(1);
+      progress.classList.add("ok");
+      file = null;
+      fileInput.value = "";
+      nameInput.value = "";
+      fileInfo.hidden = true;
+      columns.replaceChildren();
+      await onCreated(dataset);
+    } catch (err) {
+      progress.classList.add("bad");
+      showUploadError(form, err);
+    } finally {
+      submit.disabled = !file;
+    }
+  });
+
+  return card({ title: "Upload a log", body: form });
+}
+
+/** A problem with one CSV column is shown on that column's row; others next to the file or form. */
+function showUploadError(form, err) {
+  const row = err?.field ? form.querySelector(`[data-column="${CSS.escape(err.field)}"]`) : null;
+  if (row) return showError(form, { ...err, message: err.message, name: err.name, field: `column:${err.field}` });
+  return showError(form, err);
+}
+
+/** Columns of a CSV header with their units; units can be filled in before upload. */
+async function columnEditor(file, units) {
+  const head = await file.slice(0, 64 * 1024).text();
+  const firstLine = head.split(/\r?\n/, 1)[0] ?? "";
+  const sep = [",", ";", "\t"].map((s) => [s, firstLine.split(s).length]).sort((a, b) => b[1] - a[1])[0][0];
+  const cols = firstLine.split(sep).map((c) => splitHeader(c.replace(/^"|"$/g, "")));
+  if (cols.length < 2) return h("div", { class: "banner warn" }, "Could not read a header row; the server will check the file.");
+  const rows = cols.map((c, k) => {
+    const id = `unit-${k}`;
+    const input = h("input", { type: "text", id, value: c.unit, placeholder: "unit", "aria-label": `Unit of ${c.name}`,
+      name: `units.${c.name}`, "data-column": c.name, "data-field": `column:${c.name}`,
+      oninput: (e) => {
+        units[c.name] = e.target.value.trim() === c.unit ? null : e.target.value.trim();
+      } });
+    return h("tr", {}, h("td", { class: "mono" }, c.name), h("td", {}, input));
+  });
+  return h("div", { class: "field" },
+    h("div", { class: "label" }, `Columns (${cols.length}) and units`),
+    h("div", { class: "values-grid columns-table", style: { maxHeight: "220px" } },
+      h("table", { class: "data" },
+        h("thead", {}, h("tr", {}, h("th", { scope: "col" }, "Column"), h("th", { scope: "col" }, "Unit"))),
+        h("tbody", {}, rows))),
+    h("div", { class: "help" }, "Units come from “name [unit]” headers; fill in any that are missing."));
+}
+
+/* ---------- simulate ---------- */
+
+function simulateCard(ctx, onCreated) {
+  const select = h("select", { id: "sim-scenario", name: "scenario" }, h("option", { value: "" }, "Loading scenarios…"));
+  const seed = h("input", { type: "number", id: "sim-seed", name: "seed", value: "0", step: "1", min: "0" });
+  const name = h("input", { type: "text", id: "sim-name", name: "name", placeholder: "defaults to the scenario name" });
+  const about = h("div", { class: "help", "data-scenario-about": "" });
+  const submit = h("button", { type: "submit", class: "primary" }, icon(ICONS.flask), "Simulate");
+  let list = [];
+  const form = h("form", { novalidate: true, "aria-label": "Simulate a scenario" },
+    h("div", { class: "field" }, h("label", { for: "sim-scenario" }, "Scenario"), select, about),
+    h("div", { class: "fields two" },
+      h("div", { class: "field" }, h("label", { for: "sim-seed" }, "Seed"), seed),
+      h("div", { class: "field" }, h("label", { for: "sim-name" }, "Name"), name)),
+    h("div", { class: "banner error", "data-form-error": "", hidden: true }),
+    h("div", { class: "row end" }, submit));
+
+  const describe = () => {
+    const s = list.find((x) => x.name === select.value);
+    about.replaceChildren(s ? `${s.description} (${fmt(s.rate_hz, 3)} Hz, ${fmtDuration(s.duration_s)}; for ${s.estimators.join(", ")})` : "");
+  };
+  select.addEventListener("change", describe);
+  scenarios().then((items) => {
+    list = items;
+    select.replaceChildren(...items.map((s) => h("option", { value: s.name }, s.title && s.title !== s.name ? `${s.name} — ${s.title}` : s.name)));
+    describe();
+  }).catch((err) => showError(form, err));
+
+  form.addEventListener("submit", async (e) => {
+    e.preventDefault();
+    clearErrors(form);
+    submit.disabled = true;
+    submit.replaceChildren(icon(ICONS.flask), "Simulating…");
+    try {
+      const body = { scenario: select.value, seed: Number(seed.value || 0) };
+      if (name.value.trim()) body.name = name.value.trim();
+      const dataset = await api.post("/api/datasets/simulate", body, { signal: ctx.signal });
+      await onCreated(dataset);
+    } catch (err) {
+      showError(form, err);
+    } finally {
+      submit.disabled = false;
+      submit.replaceChildren(icon(ICONS.flask), "Simulate");
+    }
+  });
+  return card({ title: "Simulate a scenario", hint: "known truth", body: form });
+}
+
+/* ---------- channel previews ---------- */
+
+function sparkline(el, time, values, unit) {
+  const t = theme();
+  react(el, [{ x: time, y: values, type: "scatter", mode: "lines", line: { color: t.accent, width: 1.2 },
+    hovertemplate: `%{x:.2f} s: %{y:.4g} ${unit ?? ""}<extra></extra>` }],
+  baseLayout({
+    margin: { l: 4, r: 4, t: 2, b: 2 },
+    xaxis: axis("", { visible: false }),
+    yaxis: axis("", { visible: false }),
+    showlegend: false,
+  }), STATIC_CONFIG);
+}
+
+/* ---------- column mapping ---------- */
+
+/** Pick an estimator and the columns feeding its signals, then continue to the run form. */
+async function mappingCard(ctx, dataset) {
+  const host = h("div", { "data-mapping": "" });
+  const channels = (dataset.channels ?? []).filter((c) => c.name !== dataset.time_column);
+  let catalog = [];
+  try {
+    catalog = await estimators();
+  } catch (err) {
+    return card({ title: "Map columns", body: h("div", { class: "banner error" }, err.message) });
+  }
+  let suggested = [];
+  if (dataset.scenario) {
+    suggested = (await scenarios().catch(() => [])).find((s) => s.name === dataset.scenario)?.estimators ?? [];
+  }
+  const estSelect = h("select", { id: "map-estimator", name: "estimator" },
+    Object.entries(KIND_TITLES).map(([kind, label]) =>
+      h("optgroup", { label }, catalog.filter((e) => e.kind === kind).map((e) =>
+        h("option", { value: e.name }, `${e.name} — ${e.title}${suggested.includes(e.name) ? " (suggested)" : ""}`)))),
+    catalog.filter((e) => !KIND_TITLES[e.kind]).map((e) => h("option", { value: e.name }, `${e.name} — ${e.title}`)));
+  estSelect.value = suggested[0] ?? (catalog.find((e) => e.name === "skf") ? "skf" : catalog[0]?.name ?? "");
+  const roles = h("div", { class: "fields" });
+  const go = h("a", { class: "button primary", href: "#", "data-continue": "" }, "Continue to new run →");
+
+  const channelSelect = (id, name, chosen, { optional = false } = {}) =>
+    h("select", { id, name },
+      optional ? h("option", { value: "" }, "— none —") : null,
+      channels.map((c) => h("option", { value: c.name, selected: c.name === chosen }, withUnit(c.name, c.unit))));
+
+  const render = () => {
+    const est = catalog.find((e) => e.name === estSelect.value);
+    roles.replaceChildren();
+    if (!est) return;
+    if (est.kind === "table-filter") {
+      const guess = guessTable(channels);
+      roles.append(
+        h("div", { class: "field" }, h("label", { for: "map-y" }, "Measured output (y)"), channelSelect("map-y", "signals.y", guess.y)),
+        h("div", { class: "field" }, h("label", { for: "map-ax0" }, "Table axis 1 (x)"), channelSelect("map-ax0", "axis.0", guess.axes[0])),
+        h("div", { class: "field" }, h("label", { for: "map-ax1" }, "Table axis 2 (y)"),
+          channelSelect("map-ax1", "axis.1", guess.axes[1], { optional: true })),
+      );
+    } else {
+      const taken = new Set();
+      for (const role of rolesOf(est)) {
+        const chosen = guessColumn(role, channels, taken);
+        if (chosen) taken.add(chosen);
+        const id = `map-role-${role.role}`;
+        roles.append(h("div", { class: "field" },
+          h("label", { for: id }, `${role.role}${role.unit ? ` [${role.unit}]` : ""}`),
+          channelSelect(id, `signals.${role.role}`, chosen),
+          role.description ? h("div", { class: "help" }, role.description) : null));
+      }
+      if (!rolesOf(est).length) roles.append(h("p", { class: "help" }, "This estimator reads its channels by name (set them on the next page)."));
+    }
+    update();
+  };
+
+  const update = () => {
+    const signals = {};
+    const axes = [];
+    for (const sel of roles.querySelectorAll("select")) {
+      if (sel.name.startsWith("signals.") && sel.value) signals[sel.name.slice(8)] = sel.value;
+      if (sel.name.startsWith("axis.") && sel.value) axes.push(sel.value);
+    }
+    const q = new URLSearchParams({ dataset: String(dataset.id), estimator: estSelect.value });
+    if (Object.keys(signals).length) q.set("signals", encodeSignals(signals));
+    if (axes.length && needsTable(catalog.find((e) => e.name === estSelect.value))) q.set("axes", axes.join(","));
+    go.href = `/runs/new?${q.toString().replaceAll("%2C", ",").replaceAll("%3A", ":")}`;
+  };
+
+  estSelect.addEventListener("change", render);
+  roles.addEventListener("change", update);
+  host.append(
+    h("div", { class: "field" }, h("label", { for: "map-estimator" }, "Estimator"), estSelect),
+    roles,
+  );
+  render();
+  return card({ title: "Map columns to an estimator", hint: "then set up the run", body: host, foot: [go] });
+}

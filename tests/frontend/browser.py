@@ -1,0 +1,126 @@
+"""What the browser tests and ``scripts/screenshot.py`` share: Debian's Chromium with the
+flags it needs in a container, and a real ``mapwise serve`` on a temporary SQLite database."""
+
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import httpx
+
+if TYPE_CHECKING:
+    from playwright.sync_api import Page
+
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking"]
+VIEWPORT = {"width": 1400, "height": 900}
+ROOT = Path(__file__).resolve().parents[2]
+EXAMPLE_CSV = ROOT / "app" / "data" / "example_nox.csv"
+ARTIFACTS = ROOT / "tests" / "artifacts"
+SERVER_START_S = 120.0
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def mapwise_command() -> list[str]:
+    script = Path(sys.executable).with_name("mapwise")
+    return [str(script)] if script.exists() else [sys.executable, "-m", "app.cli"]
+
+
+@dataclass
+class Server:
+    url: str
+    process: subprocess.Popen[bytes]
+    log: Path
+
+    def api(self) -> httpx.Client:
+        return httpx.Client(base_url=self.url, timeout=60.0)
+
+    def stop(self) -> None:
+        self.process.terminate()
+        try:
+            self.process.wait(timeout=15)
+        except subprocess.TimeoutExpired:
+            self.process.kill()
+
+
+def start_server(workdir: Path) -> Server:
+    """``mapwise serve`` on a free port and a new SQLite file (no demo data); waits for
+    ``/api/health``."""
+    port = free_port()
+    log = workdir / "server.log"
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    env.pop("MAPWISE_REQUIRE_AUTH", None)
+    database = f"sqlite:///{workdir / 'db.sqlite'}"
+    process = subprocess.Popen(
+        [*mapwise_command(), "serve", "--port", str(port), "--database-url", database, "--no-demo"],
+        cwd=workdir,
+        stdout=log.open("wb"),
+        stderr=subprocess.STDOUT,
+        env=env,
+    )
+    url = f"http://127.0.0.1:{port}"
+    deadline = time.monotonic() + SERVER_START_S
+    while time.monotonic() < deadline:
+        if process.poll() is not None:
+            raise RuntimeError(f"mapwise serve exited:\n{log.read_text()[-3000:]}")
+        try:
+            if httpx.get(f"{url}/api/health", timeout=1.0).status_code == 200:
+                return Server(url, process, log)
+        except httpx.HTTPError:
+            pass
+        time.sleep(0.2)
+    process.kill()
+    raise RuntimeError(
+        f"mapwise serve did not answer in {SERVER_START_S} s:\n{log.read_text()[-3000:]}"
+    )
+
+
+def upload_example(api: httpx.Client, name: str) -> dict:
+    """The bundled NOx log (50 Hz, 150 s) as a dataset, through the real upload endpoint."""
+    with EXAMPLE_CSV.open("rb") as f:
+        r = api.post(
+            "/api/datasets", files={"file": (EXAMPLE_CSV.name, f, "text/csv")}, data={"name": name}
+        )
+    if r.status_code != 201:
+        raise RuntimeError(f"upload failed: {r.status_code} {r.text}")
+    return r.json()
+
+
+def shot(page: Page, name: str) -> Path:
+    """Save a full-page screenshot as a test artifact."""
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    path = ARTIFACTS / f"{name}.png"
+    page.screenshot(path=str(path), full_page=True)
+    return path
+
+
+def wait_run(api: httpx.Client, run_id: int, timeout_s: float = 120.0) -> dict:
+    """Poll the run until it leaves queued/running."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        run = api.get(f"/api/runs/{run_id}").json()
+        if run["status"] not in ("queued", "running"):
+            return run
+        time.sleep(0.25)
+    raise AssertionError(f"run {run_id} still {run['status']} after {timeout_s} s")
+
+
+def plot_data(page: Page, selector: str) -> list[dict]:
+    """The traces Plotly currently draws in the element matched by ``selector``."""
+    return page.eval_on_selector(
+        selector,
+        "el => (el.data || []).map(t => ({type: t.type || 'scatter', name: t.name ?? null, "
+        "z: t.z ?? null, x: Array.from(t.x ?? []), y: Array.from(t.y ?? []), "
+        "zmin: t.zmin ?? null, zmax: t.zmax ?? null}))",
+    )

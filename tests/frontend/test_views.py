@@ -1,0 +1,122 @@
+"""Every view: loads without console errors, has its own URL that survives a reload, labels
+every control, works from the keyboard; history navigation; page load time."""
+
+from __future__ import annotations
+
+import time
+import uuid
+
+import pytest
+from playwright.sync_api import Page, expect
+
+from tests.frontend.browser import shot, upload_example, wait_run
+from tests.frontend.test_compare_versions_view import start_run
+
+UNLABELLED = """
+() => [...document.querySelectorAll('main input, main select, main textarea, main button')]
+  .filter(el => el.type !== 'hidden' && el.offsetParent !== null)
+  .filter(el => !(el.labels && el.labels.length) && !el.getAttribute('aria-label')
+                && !el.getAttribute('aria-labelledby')
+                && !(el.tagName === 'BUTTON' && el.textContent.trim()))
+  .map(el => el.outerHTML.slice(0, 120))
+"""
+
+
+@pytest.fixture(scope="module")
+def finished_run(server) -> dict:
+    with server.api() as api:
+        dataset = upload_example(api, f"views-{uuid.uuid4().hex[:8]}")
+        run = start_run(api, dataset["id"], "skf")
+        return wait_run(api, run["id"])
+
+
+def views(run: dict) -> list[tuple[str, str, str]]:
+    rid, did = run["id"], run["dataset_id"]
+    return [
+        ("datasets", f"/datasets?id={did}", "Datasets"),
+        (
+            "new-run",
+            f"/runs/new?dataset={did}&estimator=skf&signals=y:nox_ppm&axes=speed_rpm,fuel_mg_per_stroke",
+            "New run",
+        ),
+        ("run", f"/runs/{rid}", run["name"]),
+        ("compare", f"/compare?runs={rid}", "Compare 1 run"),
+        ("versions", f"/versions?a={rid}", "Versions"),
+    ]
+
+
+def test_every_view_has_its_url_labels_and_no_console_errors(
+    page: Page, finished_run: dict
+) -> None:
+    for name, url, title in views(finished_run):
+        page.goto(url)
+        heading = page.locator("[data-page-title]")
+        expect(heading).to_have_text(title)
+        page.wait_for_load_state("networkidle")
+        assert page.evaluate(UNLABELLED) == [], name
+        shot(page, f"view-{name}")
+        before = page.url
+        page.reload()
+        expect(page.locator("[data-page-title]")).to_have_text(title)
+        assert page.url == before
+
+
+def test_dark_theme_applies_to_page_and_plots(page: Page, finished_run: dict) -> None:
+    page.goto(f"/runs/{finished_run['id']}")
+    expect(page.locator("[data-version-where]")).to_contain_text("final")
+    page.locator("[data-theme-toggle]").click()
+    expect(page.locator("html")).to_have_attribute("data-theme", "dark")
+    light_text = "#4a5567"  # --text-2 of the light theme
+    page.wait_for_function(
+        "c => document.querySelector('[data-plot=map]')._fullLayout.xaxis.title.font.color !== c",
+        arg=light_text,
+    )
+    shot(page, "view-run-dark")
+    page.reload()
+    expect(page.locator("html")).to_have_attribute("data-theme", "dark")
+
+
+def test_keyboard_only_navigation_and_history(page: Page, finished_run: dict) -> None:
+    page.goto("/")
+    expect(page).to_have_url(f"{page.url.split('/datasets')[0]}/datasets")
+    expect(page.locator("[data-page-title]")).to_have_text("Datasets")
+    page.keyboard.press("Tab")
+    expect(page.locator(".skip-link")).to_be_focused()
+    page.keyboard.press("Tab")
+    expect(page.locator(".brand")).to_be_focused()
+    page.keyboard.press("Tab")
+    page.keyboard.press("Tab")
+    nav_new_run = page.get_by_role("navigation", name="Main").get_by_role("link", name="New run")
+    expect(nav_new_run).to_be_focused()
+    page.keyboard.press("Enter")
+    expect(page).to_have_url(f"{page.url.split('/runs')[0]}/runs/new")
+    expect(page.locator("[data-page-title]")).to_be_focused()
+    expect(nav_new_run).to_have_attribute("aria-current", "page")
+    page.go_back()
+    expect(page.locator("[data-page-title]")).to_have_text("Datasets")
+    page.go_forward()
+    expect(page.locator("[data-page-title]")).to_have_text("New run")
+
+    # The export menu opens and moves with the arrow keys, Escape closes it.
+    page.goto(f"/runs/{finished_run['id']}")
+    menu = page.locator("[data-export-menu]")
+    menu.focus()
+    page.keyboard.press("Enter")
+    expect(page.locator('[data-export="json"]')).to_be_focused()
+    page.keyboard.press("ArrowDown")
+    expect(page.locator('[data-export="csv"]')).to_be_focused()
+    page.keyboard.press("Escape")
+    expect(menu).to_be_focused()
+    expect(menu).to_have_attribute("aria-expanded", "false")
+
+
+def test_page_load_under_one_second(page: Page, finished_run: dict) -> None:
+    page.goto("/datasets")  # warm: the browser's cache revalidates after this
+    expect(page.locator("[data-page-title]")).to_have_text("Datasets")
+    timings = []
+    for _ in range(3):
+        start = time.monotonic()
+        page.goto(f"/runs/{finished_run['id']}")
+        expect(page.locator('[data-plot="map"] .main-svg').first).to_be_attached()
+        timings.append(time.monotonic() - start)
+    assert min(timings) < 1.0, timings
