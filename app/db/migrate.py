@@ -4,7 +4,6 @@ server makes at start-up (an out-of-date shared database is never migrated silen
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Literal
 
 from alembic import command
@@ -14,8 +13,9 @@ from alembic.script import ScriptDirectory
 from sqlalchemy import inspect
 
 from app.db.engine import make_engine, normalise_url
+from app.resources import resource_dir
 
-MIGRATIONS_DIR = Path(__file__).resolve().parents[2] / "migrations"
+MIGRATIONS_DIR = resource_dir("migrations")
 
 SchemaState = Literal["empty", "current", "outdated", "unknown"]
 

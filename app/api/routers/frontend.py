@@ -14,8 +14,9 @@ from starlette.staticfiles import StaticFiles
 from starlette.types import Scope
 
 from app.errors import NotFoundError
+from app.resources import resource_dir
 
-FRONTEND_DIR = Path(__file__).resolve().parents[3] / "frontend"
+FRONTEND_DIR = resource_dir("frontend")
 VIEW_ROUTES = ("/datasets", "/runs/new", "/runs/{run_id}", "/compare", "/versions")
 NO_CACHE = {"Cache-Control": "no-cache"}  # revalidate (ETag) so browsers never run stale code
 IMMUTABLE = {"Cache-Control": "public, max-age=31536000, immutable"}
