@@ -122,6 +122,8 @@ def _cmd_serve(args: argparse.Namespace) -> int:
             )
     except SQLAlchemyError as exc:
         raise _db_error(exc, settings.database_url) from None
+    shown = "localhost" if settings.host in ("127.0.0.1", "::1") else settings.host
+    print(f"mapwise: dashboard at http://{shown}:{settings.port}/", file=sys.stderr)
     uvicorn.run(
         create_app(settings),
         host=settings.host,
