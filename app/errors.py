@@ -15,7 +15,6 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from app.io.errors import InputError
 from estimation.errors import EstimationError
 
 log = logging.getLogger("mapwise")
@@ -138,10 +137,6 @@ def install_error_handlers(app: FastAPI) -> None:
         if exc.headers:
             response.headers.update(exc.headers)
         return response
-
-    @app.exception_handler(InputError)
-    async def _input(_: Request, exc: InputError) -> JSONResponse:
-        return JSONResponse({"error": exc.to_dict()}, status_code=exc.status)
 
     @app.exception_handler(EstimationError)
     async def _estimation(_: Request, exc: EstimationError) -> JSONResponse:

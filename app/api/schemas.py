@@ -177,10 +177,6 @@ class VersionSummaryOut(BaseModel):
         )
 
 
-class VersionListOut(BaseModel):
-    items: list[VersionSummaryOut]
-
-
 class AxisOut(BaseModel):
     name: str
     unit: str = ""

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 from sqlalchemy import delete, func, select, update
+from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, undefer
 
 from app.db import blobs
@@ -33,7 +34,7 @@ from app.domain import (
     Series,
     VersionSummary,
 )
-from app.errors import NotFoundError
+from app.errors import ConflictError, NotFoundError
 
 MAX_ID = 2**31 - 1
 
@@ -191,7 +192,13 @@ class RunRepo:
             base_map_id=base_map_id,
         )
         self.s.add(row)
-        self.s.flush()
+        try:
+            self.s.flush()
+        except IntegrityError:  # the dataset or base map was deleted by a concurrent request
+            raise ConflictError(
+                f"dataset {dataset_id} or base map {base_map_id} was deleted meanwhile",
+                field="dataset_id",
+            ) from None
         return self._run(row, {}, 0)
 
     def _run(self, row: RunRow, metrics: dict[str, float | None], n_versions: int) -> Run:
@@ -405,9 +412,17 @@ class VersionRepo:
         self.s.flush()
         return _summary(row)
 
-    def list(self, run_id: int) -> list[VersionSummary]:
-        q = select(MapVersionRow).where(MapVersionRow.run_id == run_id).order_by(MapVersionRow.step)
-        return [_summary(r) for r in self.s.scalars(q)]
+    def list(self, run_id: int, *, limit: int, offset: int) -> Page[VersionSummary]:
+        where = MapVersionRow.run_id == run_id
+        total = self.s.scalar(select(func.count()).select_from(MapVersionRow).where(where)) or 0
+        q = (
+            select(MapVersionRow)
+            .where(where)
+            .order_by(MapVersionRow.step, MapVersionRow.id)
+            .limit(limit)
+            .offset(offset)
+        )
+        return Page([_summary(r) for r in self.s.scalars(q)], total, limit, offset)
 
     def _full(self, where: Any, order: Any = None) -> MapVersion | None:
         q = (

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from app.errors import AppError
+
 VALIDATION_ERROR = "validation_error"
 UNSUPPORTED_FORMAT = "unsupported_format"
 PAYLOAD_TOO_LARGE = "payload_too_large"
@@ -17,8 +19,9 @@ PAYLOAD_TOO_LARGE = "payload_too_large"
 _STATUS = {VALIDATION_ERROR: 422, UNSUPPORTED_FORMAT: 415, PAYLOAD_TOO_LARGE: 413}
 
 
-class InputError(ValueError):
-    """Input that cannot be used as given; ``str(exc)`` is the message."""
+class InputError(AppError, ValueError):
+    """Input that cannot be used as given; ``str(exc)`` is the message. Rendered by the
+    service's one :class:`~app.errors.AppError` handler."""
 
     def __init__(
         self,
@@ -30,19 +33,13 @@ class InputError(ValueError):
     ) -> None:
         if code not in _STATUS:
             raise ValueError(f"unknown error code {code!r}")
-        super().__init__(message)
-        self.message = message
-        self.field = field
+        super().__init__(message, field=field)
         self.code = code
+        self.status = _STATUS[code]  # 422, 415 or 413
         self.line = line
 
-    @property
-    def status(self) -> int:
-        """The HTTP status of :attr:`code` (422, 415 or 413)."""
-        return _STATUS[self.code]
-
     def to_dict(self) -> dict[str, Any]:
-        return {"code": self.code, "message": self.message, "field": self.field}
+        return self.body()["error"]
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.message!r}, field={self.field!r}, code={self.code!r})"

@@ -40,9 +40,9 @@ Publish = Callable[[dict[str, Any]], None]
 LIVE_POINTS_PER_TICK = 100
 PROGRESS_EVERY_S = 1.0
 STATUS_ACCEPTED = 0
-STATUS_GATE = 2
-# Snapshot status codes that count against a cell, by name (see estimation.estimator.Snapshot).
-CELL_STATUS = {"innovation": 2}
+# Snapshot status codes that count against a cell, by name (see estimation.estimator.Snapshot;
+# code 1, the accept mask, is counted by the gate that set it).
+CELL_STATUS = {"innovation": 2, "delay": 3}
 
 
 @dataclass(frozen=True, slots=True)

@@ -19,12 +19,14 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from app.domain import BaseMap, Dataset
 from app.errors import InvalidRequestError, field_of
+from app.io.columns import same_unit
 from app.services.catalog import TABLE_ROLE, kind_of, needs_table, roles
 from estimation.errors import ConfigError, EstimationError
 from estimation.estimator import EstimatorSpec, registry
 from estimation.table import Axis, Grid, broadcast_cells
 
 SERVICE_KEYS = ("pace", "version_every", "gates", "locked")
+MAX_VERSIONS = 1000  # persisted versions per run (each carries the map and estimator state)
 
 
 class AxisSpec(BaseModel):
@@ -129,6 +131,13 @@ def run_options(config: dict[str, Any], rows: int, rate_hz: float, fraction: flo
     else:
         raise InvalidRequestError(
             'version_every must be {"samples": N} or {"seconds": S}',
+            field="config.version_every",
+        )
+    if math.ceil(rows / every) > MAX_VERSIONS:
+        raise InvalidRequestError(
+            f"a version every {every} samples gives {math.ceil(rows / every)} versions of this "
+            f"{rows}-sample log; at most {MAX_VERSIONS} per run (every >= "
+            f"{math.ceil(rows / MAX_VERSIONS)} samples)",
             field="config.version_every",
         )
     gates = config.get("gates") or []
@@ -278,6 +287,7 @@ def plan_run(
     except EstimationError as exc:
         raise InvalidRequestError(" ".join(str(exc).split()), field="config") from exc
     _check_required(estimator.required_signals(), dataset, request, spec)
+    _check_units(spec, dataset, request)
     return RunPlan(
         estimator=spec.name,
         estimator_config=model.model_dump(mode="json"),
@@ -353,6 +363,22 @@ def _check_required(
         f"{[c.name for c in dataset.channels]}",
         field=f"signals.{role}" if role else "signals",
     )
+
+
+def _check_units(spec: EstimatorSpec, dataset: Dataset, request: RunRequest) -> None:
+    """A column feeding a role must carry the role's unit where both are known: a pressure
+    logged in kPa for a role in Pa would otherwise be read 1000× too small."""
+    for role in roles(spec):
+        column = request.signals.get(role.role, role.default)
+        if not role.unit or column is None or not dataset.has_channel(column):
+            continue
+        unit = dataset.unit_of(column)
+        if unit and not same_unit(unit, role.unit):
+            raise InvalidRequestError(
+                f"column {column!r} is in {unit!r} but {spec.name}'s {role.role} is in "
+                f"{role.unit!r}; convert the column or map another one",
+                field=f"signals.{role.role}",
+            )
 
 
 def grid_shape(table_spec: dict[str, Any] | None) -> tuple[int, ...] | None:

@@ -62,14 +62,21 @@ class RunService:
     # -- lifecycle ----------------------------------------------------------------------------
 
     def create(self, request: RunRequest) -> Run:
-        with self.db.read() as s:
+        """Plan and store the run in one transaction, then hand it to the executor."""
+        run = self._store(request)
+        self._submit(run.id)
+        return run
+
+    def _store(self, request: RunRequest) -> Run:
+        with self.db.write() as s:
             dataset = DatasetRepo(s).get(request.dataset_id)
             base_map = None
             if request.base_map_id is not None:
                 base_map = BaseMapRepo(s).get(request.base_map_id)
-        plan = plan_run(request, dataset, base_map, version_fraction=self.settings.version_fraction)
-        with self.db.write() as s:
-            run = RunRepo(s).add(
+            plan = plan_run(
+                request, dataset, base_map, version_fraction=self.settings.version_fraction
+            )
+            return RunRepo(s).add(
                 dataset_id=dataset.id,
                 name=plan.name,
                 estimator=plan.estimator,
@@ -81,8 +88,6 @@ class RunService:
                 n_samples=plan.n_samples,
                 base_map_id=request.base_map_id,
             )
-        self._submit(run.id)
-        return run
 
     def get(self, run_id: int) -> Run:
         with self.db.read() as s:
@@ -131,10 +136,10 @@ class RunService:
 
     # -- versions -------------------------------------------------------------------------------
 
-    def versions(self, run_id: int) -> list[VersionSummary]:
+    def versions(self, run_id: int, *, limit: int, offset: int) -> Page[VersionSummary]:
         with self.db.read() as s:
             RunRepo(s).get(run_id)
-            return VersionRepo(s).list(run_id)
+            return VersionRepo(s).list(run_id, limit=limit, offset=offset)
 
     def version(self, run_id: int, version_id: int) -> MapVersion:
         with self.db.read() as s:

@@ -99,8 +99,8 @@ class LpvConfig(BaseModel):
     )
     rho1: str = Field(
         "rho1",
-        description="Channel of ρ1: 'rho1' (intake-manifold balance) or 'rho1_compressor' "
-        "(the compressor map, LPV (3) literally).",
+        description="Channel of ρ1 [kg/rad]: 'rho1' (intake-manifold balance) or "
+        "'rho1_compressor' (the compressor map, LPV (3) literally).",
     )
     eps1: float = Field(0.25, gt=0, description="ε1 of the LMI (LPV (28)).")
     eps2: float = Field(0.11, gt=0, description="ε2 of the LMI (LPV (28)).")
@@ -123,12 +123,14 @@ class LpvConfig(BaseModel):
         description="Freeze θ where ρ1 = 0: the compressor model then predicts no flow, so "
         "the whole MAF reading would be taken for sensor error.",
     )
-    p_im: str = "p_im_pa"
-    p_em: str | None = Field("p_em_pa", description="Only used to initialise x̂2.")
-    omega_t: str = "omega_t_rad_s"
-    maf: str = "maf_kg_s"
-    fuel_flow: str = "w_f_kg_s"
-    t_em: str | None = Field("t_em_k", description="Exhaust temperature for the default a2.")
+    p_im: str = Field("p_im_pa", description="Intake manifold pressure [Pa].")
+    p_em: str | None = Field(
+        "p_em_pa", description="Exhaust manifold pressure [Pa]; only used to initialise x̂2."
+    )
+    omega_t: str = Field("omega_t_rad_s", description="Turbocharger speed [rad/s].")
+    maf: str = Field("maf_kg_s", description="MAF sensor reading W_c + ΔW_c [kg/s].")
+    fuel_flow: str = Field("w_f_kg_s", description="Fuel mass flow W_f [kg/s].")
+    t_em: str | None = Field("t_em_k", description="Exhaust temperature [K] for the default a2.")
 
     @model_validator(mode="after")
     def _check(self) -> Self:

@@ -24,10 +24,7 @@ def _version() -> str:
 @open_router.get("/health", response_model=HealthOut)
 def health(services: ServicesDep) -> HealthOut:
     """Liveness, the database backend and its schema revision (no authentication)."""
-    from sqlalchemy import text
-
-    with services.db.read() as s:
-        s.execute(text("SELECT 1"))
+    services.db.ping()
     return HealthOut(
         status="ok",
         database=services.db.backend,

@@ -18,13 +18,12 @@ from app.api.schemas import (
     RunOut,
     SeriesLine,
     SeriesOut,
-    VersionListOut,
     VersionOut,
     VersionSummaryOut,
 )
 from app.errors import InvalidRequestError
 from app.services.decimate import finite_or_none, nested_or_none
-from app.services.run_plan import RunRequest
+from app.services.run_plan import MAX_VERSIONS, RunRequest
 
 router = APIRouter(tags=["runs"], responses=ERRORS)
 
@@ -74,9 +73,22 @@ def resume_run(services: ServicesDep, run_id: Id) -> RunOut:
     return RunOut.of(services.runs.resume(run_id))
 
 
-@router.get("/runs/{run_id}/versions", response_model=VersionListOut)
-def list_versions(services: ServicesDep, run_id: Id) -> VersionListOut:
-    return VersionListOut(items=[VersionSummaryOut.of(v) for v in services.runs.versions(run_id)])
+@router.get("/runs/{run_id}/versions", response_model=PageOut[VersionSummaryOut])
+def list_versions(
+    services: ServicesDep,
+    run_id: Id,
+    limit: Annotated[int, Query(ge=1, le=MAX_VERSIONS + 1)] = MAX_VERSIONS + 1,
+    offset: Offset = 0,
+) -> PageOut:
+    """The run's map versions by step (at most ``MAX_VERSIONS`` plus the final one, so the
+    default page holds them all)."""
+    page = services.runs.versions(run_id, limit=limit, offset=offset)
+    return PageOut[VersionSummaryOut](
+        items=[VersionSummaryOut.of(v) for v in page.items],
+        total=page.total,
+        limit=page.limit,
+        offset=page.offset,
+    )
 
 
 @router.get("/runs/{run_id}/versions/{version_id}", response_model=VersionOut)

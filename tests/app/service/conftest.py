@@ -1,6 +1,6 @@
 """Fixtures of the service tests: every API test runs on SQLite and on PostgreSQL.
 
-Each backend gets a fresh database per test session, migrated from empty by the app's own
+Each backend gets a fresh database per test module, migrated from empty by the app's own
 start-up, and one real app (TestClient: real ASGI app, lifespan, process pool). PostgreSQL
 is the local server (127.0.0.1:5432, trust auth, user postgres); a database
 ``mapwise_test_<random>`` is created for the session and dropped at its end.
@@ -82,14 +82,15 @@ def backend(request: pytest.FixtureRequest) -> str:
     return str(request.param)
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def database_url(backend: str, fresh_url) -> str:  # type: ignore[no-untyped-def]
     return fresh_url(backend)
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def client(database_url: str) -> Iterator[TestClient]:
-    """The real app on a fresh database of the session's backend, runs executed by its pool."""
+    """The real app on a fresh database of the backend for each test module (no state shared
+    across modules), runs executed by its pool."""
     with TestClient(create_app(service_settings(database_url))) as c:
         yield c
 

@@ -148,6 +148,8 @@ def test_nox_demo_config_with_sensor_delay_equals_mapwise_adapt(
         k: v for k, v in expected.items() if k != "timing"
     }
     assert got["rejected"]["delay"] == 38
+    cells = client.get(f"/api/runs/{run['id']}/cells").json()
+    assert np.sum(cells["rejected"]["delay"]) == pytest.approx(38)  # where the log starts
     versions = client.get(f"/api/runs/{run['id']}/versions").json()["items"]
     # every 30 s of a 150 s log at 50 Hz: 1500, 3000, 4500, 6000 samples, then the final one
     assert [v["final"] for v in versions] == [False] * (len(versions) - 1) + [True]
@@ -164,8 +166,18 @@ def test_run_document_versions_series_cells(client: TestClient) -> None:
     assert done["metrics"]["samples"] == 3000
     assert 0.04 < done["metrics"]["output_rmse"] < 0.3  # noise 0.05 plus the transient from θ0 = 0
     assert done["rejected"] == {"mask": 0, "innovation": 0, "delay": 0}
-    versions = client.get(f"/api/runs/{run['id']}/versions").json()["items"]
+    page = client.get(f"/api/runs/{run['id']}/versions").json()
+    versions = page["items"]
     assert [v["step"] for v in versions] == [1000, 2000, 3000]
+    assert page["total"] == 3
+    second = client.get(f"/api/runs/{run['id']}/versions", params={"limit": 1, "offset": 1})
+    assert [v["step"] for v in second.json()["items"]] == [2000]
+    too_many = client.post(
+        "/api/runs", json=run_body(dataset["id"], version_every={"samples": 2})
+    )  # 1500 versions of a 3000-sample log
+    assert too_many.status_code == 422
+    assert too_many.json()["error"]["field"] == "config.version_every"
+    assert ">= 3 samples" in too_many.json()["error"]["message"]
     first = client.get(f"/api/runs/{run['id']}/versions/{versions[0]['id']}").json()
     last = client.get(f"/api/runs/{run['id']}/versions/{versions[-1]['id']}").json()
     assert np.array(first["values"]).shape == (4, 4)
@@ -188,6 +200,7 @@ def test_run_document_versions_series_cells(client: TestClient) -> None:
     cells = client.get(f"/api/runs/{run['id']}/cells").json()
     assert cells["visits"] == last["visits"]
     assert cells["rejected"]["innovation"] == np.zeros((4, 4)).tolist()
+    assert cells["rejected"]["delay"] == np.zeros((4, 4)).tolist()
 
 
 def test_exports_csv_dcm_mcap(client: TestClient) -> None:

@@ -4,11 +4,14 @@ failures, cancel and resume, pace, concurrency, simulated datasets, base maps.""
 from __future__ import annotations
 
 import time
+from collections.abc import Iterator
+from datetime import datetime
 
 import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
+from app.api import create_app
 from app.io.csv_files import read_csv
 from estimation.estimator import get_spec
 from tests.app.service.helpers import (
@@ -16,6 +19,7 @@ from tests.app.service.helpers import (
     final_values,
     log_csv,
     run_body,
+    service_settings,
     start_run,
     upload_ok,
     wait_run,
@@ -166,19 +170,34 @@ def test_cancel_a_queued_run(client: TestClient) -> None:
         assert wait_run(client, run["id"])["status"] == "cancelled"
 
 
-def test_eight_runs_at_once_complete_correctly(client: TestClient, tmp_path) -> None:  # type: ignore[no-untyped-def]
+@pytest.fixture(scope="module")
+def eight_workers(backend: str, fresh_url) -> Iterator[TestClient]:  # type: ignore[no-untyped-def]
+    """An app with eight run workers on a fresh database of the backend."""
+    settings = service_settings(fresh_url(backend), run_workers=8)
+    with TestClient(create_app(settings)) as c:
+        yield c
+
+
+def test_eight_runs_at_once_complete_correctly(eight_workers: TestClient, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    client = eight_workers
     texts = [log_csv(2500, seed=20 + i) for i in range(2)]
     datasets = [upload_ok(client, t)["id"] for t in texts]
     estimators = ["kf", "skf", "sskf", "rls"]
     jobs = [(d, e) for d in range(2) for e in estimators]
-    runs = [start_run(client, run_body(datasets[d], e)) for d, e in jobs]
+    # 50 s of log at 25× real time: each run takes 2 s, long enough for all to overlap
+    runs = [start_run(client, run_body(datasets[d], e, pace=25)) for d, e in jobs]
     assert len(runs) == 8
+    finished = []
     for (d, estimator), run in zip(jobs, runs, strict=True):
         done = wait_run(client, run["id"], timeout=180)
         assert done["status"] == "succeeded", done["error"]
+        finished.append(done)
         expected = _reference(texts[d], tmp_path, estimator)["values"]
         got = np.array(final_values(client, run["id"])["values"])
         np.testing.assert_array_equal(got, expected)
+    last_start = max(datetime.fromisoformat(r["started_at"]) for r in finished)
+    first_end = min(datetime.fromisoformat(r["finished_at"]) for r in finished)
+    assert last_start < first_end  # all eight were running at the same moment
 
 
 def test_simulated_dataset_keeps_truth_for_metrics(client: TestClient) -> None:
@@ -286,3 +305,23 @@ def test_dataset_preview_keeps_extremes(client: TestClient) -> None:
     preview = client.get(f"/api/datasets/{dataset['id']}/preview", params={"points": 100}).json()
     assert len(preview["time"]) == 100
     assert max(preview["channels"]["x"]["values"]) == 1000
+
+
+def test_a_column_in_the_wrong_unit_is_refused_with_its_role(client: TestClient) -> None:
+    t = np.arange(200) / 1000.0
+    rows = ["time [s],n [rad/s],load [N·m],n_rpm [1/min]"]
+    rows += [f"{x:.3f},230.0,100.0,2200.0" for x in t]
+    dataset = upload_ok(client, "\n".join(rows) + "\n")
+    body = {
+        "dataset_id": dataset["id"],
+        "estimator": "uio",
+        "signals": {"speed_channel": "n", "load_channel": "load"},
+    }
+    response = client.post("/api/runs", json=body)
+    assert response.status_code == 422
+    error = response.json()["error"]
+    assert error["field"] == "signals.speed_channel"
+    assert "'rad/s'" in error["message"]
+    assert "'rpm'" in error["message"]
+    body["signals"]["speed_channel"] = "n_rpm"  # 1/min is rpm
+    assert client.post("/api/runs", json=body).status_code == 201
