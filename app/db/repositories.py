@@ -522,9 +522,6 @@ class VersionRepo:
             delete(MapVersionRow).where(MapVersionRow.run_id == run_id, MapVersionRow.step > step)
         )
 
-    def delete_all(self, run_id: int) -> None:
-        self.s.execute(delete(MapVersionRow).where(MapVersionRow.run_id == run_id))
-
 
 class MetricRepo:
     def __init__(self, session: Session) -> None:
@@ -557,9 +554,6 @@ class MetricRepo:
                 Series(row.name.removeprefix("series:"), row.unit, arrays["time"], arrays["values"])
             )
         return out
-
-    def clear(self, run_id: int) -> None:
-        self.s.execute(delete(RunMetricRow).where(RunMetricRow.run_id == run_id))
 
 
 # --- base maps -----------------------------------------------------------------------------

@@ -205,7 +205,3 @@ class LiveHub:
     def _broadcast_resync(self, run_id: int) -> None:
         for viewer in self.viewers.get(run_id, ()):
             viewer.resync()
-
-    def status_from_outside(self, run_id: int, status: str, error: str | None = None) -> None:
-        """A status change made by the API itself (cancel of a queued run, resume)."""
-        self._status(run_id, {"status": status, "error": error, "progress": 0.0})

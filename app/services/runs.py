@@ -13,7 +13,7 @@ from app.config import Settings
 from app.db.engine import Database
 from app.db.repositories import BaseMapRepo, DatasetRepo, MetricRepo, RunRepo, VersionRepo
 from app.domain import MapVersion, Page, Run, Series, VersionSummary
-from app.errors import ConflictError, InvalidRequestError, NotFoundError
+from app.errors import ConflictError, InvalidRequestError
 from app.services.datasets import unpack_signals
 from app.services.decimate import stride_decimate
 from app.services.run_plan import RunRequest, plan_run
@@ -313,9 +313,3 @@ def _json_bytes(document: dict[str, Any]) -> bytes:
     import json
 
     return json.dumps(document).encode()
-
-
-def require_found(value: Any, message: str) -> Any:
-    if value is None:
-        raise NotFoundError(message)
-    return value

@@ -90,11 +90,14 @@ def _full_from_live(run: Run, live: LiveState) -> dict[str, Any]:
 
 
 async def _full(services: Services, run_id: int) -> tuple[dict[str, Any], str]:
-    """A full frame and the run's status; live state when executing, else the database."""
+    """A full frame and the run's status: from the hub's live state while the run executes
+    (one small query for the run document), else from the stored version and series."""
+    if services.hub.state(run_id) is not None:
+        run = await run_in_threadpool(services.runs.get, run_id)
+        live = services.hub.state(run_id)  # read after the await: the freshest live state
+        if live is not None and run.status not in FINISHED:
+            return _full_from_live(run, live), live.status
     run, version, lines = await run_in_threadpool(_db_parts, services, run_id)
-    live = services.hub.state(run_id)  # read after the await: the freshest live state
-    if live is not None and run.status not in FINISHED:
-        return _full_from_live(run, live), live.status
     return _full_from_db(run, version, lines), run.status
 
 

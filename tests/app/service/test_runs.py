@@ -325,3 +325,32 @@ def test_a_column_in_the_wrong_unit_is_refused_with_its_role(client: TestClient)
     assert "'rpm'" in error["message"]
     body["signals"]["speed_channel"] = "n_rpm"  # 1/min is rpm
     assert client.post("/api/runs", json=body).status_code == 201
+
+
+def test_rate_and_holdoff_gates_through_the_api(client: TestClient, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """The rate gate (|Δtemp/Δt| ≤ 5 degC/s) and a 2 s hold-off after temp < 25 degC,
+    counted per gate (first gate wins) and per cell, against a direct computation."""
+    text = log_csv(3000, seed=6)  # 50 Hz, temp = 60 + 40 sin(k/300)
+    dataset = upload_ok(client, text)
+    gates = [
+        {"type": "rate", "channel": "temp", "max_abs": 5.0},
+        {"type": "holdoff", "channel": "temp", "below": 25.0, "seconds": 2.0},
+    ]
+    done = wait_run(client, start_run(client, run_body(dataset["id"], gates=gates))["id"])
+    assert done["status"] == "succeeded", done["error"]
+    ref = _reference(text, tmp_path, "skf")["signals"]
+    t, temp = ref.time, ref["temp"]
+    rate = np.abs(np.diff(temp) / np.diff(t))
+    rate = np.concatenate([rate[:1], rate])
+    fast = rate > 5.0
+    events = np.flatnonzero(temp < 25.0)
+    held = np.array([bool(np.any((events <= k) & (t[k] - t[events] <= 2.0))) for k in range(3000)])
+    assert fast.sum() > 100
+    assert (held & ~fast).sum() > 100
+    assert done["rejected"]["gate:rate:temp"] == int(fast.sum())
+    assert done["rejected"]["gate:holdoff:temp"] == int((held & ~fast).sum())
+    cells = client.get(f"/api/runs/{done['id']}/cells").json()
+    assert np.sum(cells["rejected"]["rate:temp"]) == pytest.approx(fast.sum())
+    assert np.sum(cells["rejected"]["holdoff:temp"]) == pytest.approx((held & ~fast).sum())
+    expected = _reference(text, tmp_path, "skf", accept=~(fast | held))["values"]
+    np.testing.assert_array_equal(np.array(final_values(client, done["id"])["values"]), expected)
