@@ -6,8 +6,12 @@ Against a real ``mapwise serve`` process:
    grid at full speed, and wait until its versions, metrics and series are persisted:
    seconds per phase and rows/s;
 2. a paced run watched by 20 WebSocket viewers: frames/s each viewer receives;
-3. meanwhile, API latency (p50/p99) of ``GET /api/runs/{id}`` and ``GET /api/datasets``
-   polled by 4 concurrent clients.
+3. API latency (p50/p99) of ``GET /api/runs/{id}`` and ``GET /api/datasets`` polled by 4
+   concurrent clients, measured apart during phase 1 (the bulk upload and full-speed run)
+   and during phase 2 (the 20 viewers).
+
+A run that does not finish in ``--timeout`` seconds, or a viewer or poller that fails, ends
+the benchmark with an error instead of a figure.
 
     .venv/bin/python scripts/bench_service.py [--database-url URL] [--rows N] [--json]
 """
@@ -76,12 +80,38 @@ def start_server(url: str, port: int, log: Path) -> subprocess.Popen[bytes]:
     raise RuntimeError(f"server did not start: {log.read_text()[-2000:]}")
 
 
-def wait(client: httpx.Client, run_id: int, until: tuple[str, ...]) -> dict[str, Any]:
+def wait(
+    client: httpx.Client, run_id: int, until: tuple[str, ...], timeout: float = 600.0
+) -> dict[str, Any]:
+    deadline = time.monotonic() + timeout
     while True:
         run = client.get(f"/api/runs/{run_id}").json()
         if run["status"] in until:
             return run
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"run {run_id} still {run['status']} after {timeout:.0f} s")
         time.sleep(0.05)
+
+
+class Worker(threading.Thread):
+    """A thread whose exception is kept and re-raised by :meth:`result`."""
+
+    def __init__(self, target: Any, *args: Any) -> None:
+        super().__init__(daemon=True)
+        self._call = (target, args)
+        self.error: BaseException | None = None
+
+    def run(self) -> None:
+        target, args = self._call
+        try:
+            target(*args)
+        except BaseException as exc:
+            self.error = exc
+
+    def result(self) -> None:
+        self.join()
+        if self.error is not None:
+            raise RuntimeError(f"benchmark thread failed: {self.error!r}") from self.error
 
 
 def run_body(dataset_id: int, **config: Any) -> dict[str, Any]:
@@ -104,7 +134,7 @@ def viewer(url: str, seconds: float, counts: list[int], index: int) -> None:
 
     end = time.monotonic() + seconds
     n = 0
-    with connect(url, max_size=None) as ws:
+    with connect(url, max_size=None, open_timeout=30) as ws:
         while time.monotonic() < end:
             try:
                 message = json.loads(ws.recv(timeout=max(0.01, end - time.monotonic())))
@@ -124,12 +154,24 @@ def poller(base: str, paths: list[str], stop: threading.Event, out: list[float])
                 out.append(time.perf_counter() - t0)
 
 
+def latency_figures(phase: str, latencies: list[float]) -> dict[str, float]:
+    lat_ms = sorted(1000 * x for x in latencies)
+    if not lat_ms:
+        raise RuntimeError(f"no API request completed during the {phase} phase")
+    return {
+        f"api_requests_{phase}": len(lat_ms),
+        f"api_p50_ms_{phase}": round(lat_ms[len(lat_ms) // 2], 1),
+        f"api_p99_ms_{phase}": round(lat_ms[int(0.99 * (len(lat_ms) - 1))], 1),
+    }
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--database-url", help="default: a fresh SQLite file")
     parser.add_argument("--rows", type=int, default=360_000)
     parser.add_argument("--viewers", type=int, default=20)
     parser.add_argument("--live-seconds", type=float, default=20.0)
+    parser.add_argument("--timeout", type=float, default=600.0, help="per run, seconds")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     work = Path(tempfile.mkdtemp(prefix="mapwise-bench-"))
@@ -155,7 +197,13 @@ def main() -> None:
             tiny = client.post("/api/datasets", files={"file": ("w.csv", small.encode())}).json()
             for _ in range(2):
                 warm = client.post("/api/runs", json=run_body(tiny["id"])).json()
-                wait(client, warm["id"], ("succeeded", "failed"))
+                wait(client, warm["id"], ("succeeded", "failed"), args.timeout)
+            bulk_latencies: list[float] = []
+            stop = threading.Event()
+            paths = ["/api/runs?limit=5", "/api/datasets"]
+            pollers = [Worker(poller, base, paths, stop, bulk_latencies) for _ in range(4)]
+            for th in pollers:
+                th.start()
             t0 = time.perf_counter()
             with log_path.open("rb") as f:
                 response = client.post("/api/datasets", files={"file": ("drive.csv", f)})
@@ -163,9 +211,13 @@ def main() -> None:
             dataset = response.json()
             t1 = time.perf_counter()
             run = client.post("/api/runs", json=run_body(dataset["id"])).json()
-            done = wait(client, run["id"], ("succeeded", "failed"))
+            done = wait(client, run["id"], ("succeeded", "failed"), args.timeout)
             t2 = time.perf_counter()
-            assert done["status"] == "succeeded", done["error"]
+            stop.set()
+            for th in pollers:
+                th.result()
+            if done["status"] != "succeeded":
+                raise RuntimeError(f"the bulk run failed: {done['error']}")
             result |= {
                 "upload_s": round(t1 - t0, 2),
                 "run_and_persist_s": round(t2 - t1, 2),
@@ -173,43 +225,37 @@ def main() -> None:
                 "total_s": round(t2 - t0, 2),
                 "rows_per_s": round(args.rows / (t2 - t0)),
                 "versions": done["n_versions"],
+                **latency_figures("bulk", bulk_latencies),
             }
 
             duration_s = args.rows / 100.0
             pace = duration_s / (args.live_seconds * 1.5)
             live = client.post("/api/runs", json=run_body(dataset["id"], pace=pace)).json()
-            wait(client, live["id"], ("running",))
+            wait(client, live["id"], ("running",), args.timeout)
             counts = [0] * args.viewers
             ws_url = f"ws://127.0.0.1:{port}/api/runs/{live['id']}/stream"
             threads = [
-                threading.Thread(target=viewer, args=(ws_url, args.live_seconds, counts, i))
-                for i in range(args.viewers)
+                Worker(viewer, ws_url, args.live_seconds, counts, i) for i in range(args.viewers)
             ]
             latencies: list[float] = []
             stop = threading.Event()
             paths = [f"/api/runs/{live['id']}", "/api/datasets"]
-            pollers = [
-                threading.Thread(target=poller, args=(base, paths, stop, latencies))
-                for _ in range(4)
-            ]
+            pollers = [Worker(poller, base, paths, stop, latencies) for _ in range(4)]
             for th in threads + pollers:
                 th.start()
             for th in threads:
-                th.join()
+                th.result()
             stop.set()
             for th in pollers:
-                th.join()
+                th.result()
             client.post(f"/api/runs/{live['id']}/cancel")
             rates = [c / args.live_seconds for c in counts]
-            lat_ms = sorted(1000 * x for x in latencies)
             result |= {
                 "viewers": args.viewers,
                 "frames_per_s_per_viewer_min": round(min(rates), 1),
                 "frames_per_s_per_viewer_mean": round(statistics.mean(rates), 1),
                 "frames_per_s_total": round(sum(rates), 1),
-                "api_requests": len(lat_ms),
-                "api_p50_ms": round(lat_ms[len(lat_ms) // 2], 1),
-                "api_p99_ms": round(lat_ms[int(0.99 * (len(lat_ms) - 1))], 1),
+                **latency_figures("live", latencies),
             }
     finally:
         proc.send_signal(signal.SIGTERM)
