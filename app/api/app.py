@@ -23,6 +23,7 @@ from app.config import Settings, get_settings
 from app.db.engine import Database
 from app.db.migrate import check_schema, upgrade
 from app.errors import PayloadTooLargeError, install_error_handlers
+from app.logs import install_redaction
 from app.runs.executor import RunExecutor
 from app.runs.hub import LiveHub
 from app.services.base_maps import BaseMapService
@@ -53,6 +54,7 @@ def create_app(settings: Settings | None = None, *, execute_runs: bool = True) -
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        install_redaction()
         revision = await asyncio.to_thread(prepare_database, settings)
         db = Database(settings.database_url)
         hub = LiveHub()

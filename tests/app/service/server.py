@@ -26,7 +26,15 @@ def free_port() -> int:
 class Server:
     """``python -m app.cli serve`` on a free port; ``kill()`` is ``kill -9``."""
 
-    def __init__(self, database_url: str, *, demo: bool = False, workers: int = 2) -> None:
+    def __init__(
+        self,
+        database_url: str,
+        *,
+        demo: bool = False,
+        workers: int = 2,
+        log_level: str = "warning",
+        env: dict[str, str] | None = None,
+    ) -> None:
         self.database_url = database_url
         self.port = free_port()
         self.base = f"http://127.0.0.1:{self.port}"
@@ -34,11 +42,11 @@ class Server:
         args = [
             sys.executable, "-m", "app.cli", "serve",
             "--host", "127.0.0.1", "--port", str(self.port),
-            "--database-url", database_url, "--workers", str(workers), "--log-level", "warning",
+            "--database-url", database_url, "--workers", str(workers), "--log-level", log_level,
         ]  # fmt: skip
         if not demo:
             args.append("--no-demo")
-        env = os.environ | {"MAPWISE_CANCEL_POLL_S": "0.05"}
+        env = os.environ | {"MAPWISE_CANCEL_POLL_S": "0.05"} | (env or {})
         self.log = tempfile.NamedTemporaryFile(  # noqa: SIM115 - closed in stop()
             "w+", prefix="mapwise-serve-", suffix=".log", delete=False
         )

@@ -279,3 +279,28 @@ def test_graceful_stop_interrupts_then_resume_completes(backend: str, fresh_url)
         assert got["variance"] == expected["variance"]
     finally:
         second.stop()
+
+
+def test_the_websocket_token_never_reaches_the_log(backend: str, fresh_url) -> None:  # type: ignore[no-untyped-def]
+    from app.cli import main as cli_main
+
+    url = fresh_url(backend)
+    assert cli_main(["db", "upgrade", "--database-url", url]) == 0
+    from app.db.engine import Database
+    from app.services.tokens import TokenService
+
+    db = Database(url)
+    _, secret = TokenService(db).create("log test")
+    db.dispose()
+    srv = Server(url, log_level="info", env={"MAPWISE_REQUIRE_AUTH": "1"})
+    try:
+        headers = {"Authorization": f"Bearer {secret}"}
+        assert srv.http.get("/api/runs", headers=headers).status_code == 200
+        with connect(f"{srv.ws_base}/api/runs/999/stream?token={secret}") as ws:
+            assert json.loads(ws.recv(timeout=30))["type"] == "error"  # no such run
+        time.sleep(0.5)
+        log = srv.output()
+        assert "/api/runs/999/stream?token=***" in log
+        assert secret not in log
+    finally:
+        srv.stop()
