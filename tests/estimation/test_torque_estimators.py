@@ -6,12 +6,14 @@ import functools
 import json
 import math
 
+import numba
 import numpy as np
 import pytest
+import scipy.linalg
 from numpy.testing import assert_allclose, assert_array_equal
 
 from estimation.errors import ConfigError, StateError
-from estimation.kernels.torque import R_FLOOR
+from estimation.kernels.torque import R_FLOOR, SUBSTEPS
 from estimation.metrics import torque_metrics
 from estimation.scenarios import get_scenario
 from estimation.signals import Signals
@@ -76,9 +78,78 @@ def ref_smo(n: np.ndarray, tl: np.ndarray, J: float, k: float, lam: float) -> np
     return ref_filter(np.array(v), k)
 
 
+RADAU_A = np.array([[5 / 12, -1 / 12], [3 / 4, 1 / 4]])  # Radau IIA, 2 stages (Butcher)
+RADAU_B = np.array([3 / 4, 1 / 4])
+RADAU_C = np.array([1 / 3, 1.0])
+
+
 def ref_adaptive(sig: Signals, c: AdaptiveConstConfig | AdaptiveTvConfig) -> dict[str, list]:
-    """TQ (42)–(54) step by step: filters and P, Q, R = K⁻¹ by exact ZOH, Θ̂ by backward Euler
-    of Θ̂' = −G(W1 + κW2) with G = Γ (50) or ΓK (54), K = R⁻¹ of the floored R (kernel docs)."""
+    """TQ (42)–(54) under a ZOH of N, τ_l, ṁ_ai, step by step with matrices.
+
+    Filters, P, Q and R = K⁻¹ (TQ (53)) exactly by one matrix exponential per sample (Van
+    Loan): the filter states ``z`` and ``1`` obey ``ż = Lz``, so ``Z = zzᵀ`` obeys
+    ``Ż = LZ + ZLᵀ``, and ``Ṗ = −ℓP + EZEᵀ``, ``Q̇ = −ℓQ + EZc_y`` are linear in ``Z``.
+    Θ̂' = −G(AΘ̂ − c) with G = Γ (50) or Γ·inv(R̃) (54) by the Radau IIA tableau in its
+    textbook form, SUBSTEPS steps per sample (kernel docs)."""
+    scale = {"kg/s": 1.0, "g/s": 1e3, "kg/h": 3.6e3}[c.air_unit]
+    speed, load = sig["speed_rpm"], sig["load_torque_nm"]
+    air = scale * sig["air_mass_flow_kg_s"]
+    J, k, ell, kappa = c.J_nm_s_per_rpm, c.k, c.ell, c.kappa
+    tv = isinstance(c, AdaptiveTvConfig)
+    gamma = np.diag(c.gamma)
+    hs = TS / SUBSTEPS
+    z = np.zeros(4)  # N_f, τ_lf, Φ_f1, Φ_f2
+    P, Q = np.zeros((2, 2)), np.zeros(2)
+    R = np.diag(c.K0) if isinstance(c, AdaptiveTvConfig) else np.eye(2)
+    theta = np.array(c.theta0, dtype=float)
+    E, I5 = np.eye(5)[2:4], np.eye(5)
+    out: dict[str, list] = {"torque_nm": [], "theta1": [], "theta2": [], "pe_lambda_min": []}
+    for N, tl, m in zip(speed, load, air, strict=True):
+        out["torque_nm"].append(N * theta[0] + m * theta[1])
+        out["theta1"].append(theta[0])
+        out["theta2"].append(theta[1])
+        out["pe_lambda_min"].append(np.linalg.eigvalsh(P)[0])
+        L = np.zeros((5, 5))  # d/dt [N_f, τ_lf, Φ_f1, Φ_f2, 1]: TQ (9), (42)
+        L[:4, :4] = -np.eye(4) / k
+        L[:4, 4] = np.array([N, tl, N, m]) / k
+        c_y = np.array([-J / k, 1.0, 0.0, 0.0, J * N / k])  # y = J(N − N_f)/k + τ_lf
+        gen = np.zeros((35, 35))  # [vec Z, vec P, Q, vec R]
+        gen[:25, :25] = np.kron(L, I5) + np.kron(I5, L)
+        gen[25:29, :25] = np.kron(E, E)
+        gen[29:31, :25] = np.kron(E, c_y[None, :])
+        gen[31:35, :25] = np.kron(E, E)
+        gen[25:, 25:] = -ell * np.eye(10)
+        props = [scipy.linalg.expm(gen * node * hs) for node in RADAU_C]
+        for _ in range(SUBSTEPS):
+            ze = np.append(z, 1.0)
+            x0 = np.concatenate([np.outer(ze, ze).ravel(), P.ravel(), Q, R.ravel()])
+            jac, force = [], []
+            for prop in props:
+                x = prop @ x0
+                zr = x[:25].reshape(5, 5)[:, 4]
+                Pr, Qr, Rr = x[25:29].reshape(2, 2), x[29:31], x[31:35].reshape(2, 2)
+                phi, y = zr[2:4], c_y @ zr
+                A = Pr + kappa * np.outer(phi, phi)  # W1 + κW2 = AΘ̂ − c, TQ (46)–(47)
+                cc = Qr + kappa * phi * y
+                G = gamma @ np.linalg.inv(Rr + R_FLOOR * np.diag(np.diag(Rr))) if tv else gamma
+                jac.append(-G @ A)
+                force.append(G @ cc)
+            # stages Y_j = Θ̂ + hs·Σ_l a_jl·f_l(Y_l), f_l(θ) = jac_l·θ + force_l
+            big = np.eye(4) - hs * np.block(
+                [[RADAU_A[j, i] * jac[i] for i in range(2)] for j in range(2)]
+            )
+            rhs = np.concatenate([theta + hs * (RADAU_A[j] @ np.array(force)) for j in range(2)])
+            Y = np.linalg.solve(big, rhs).reshape(2, 2)
+            theta = theta + hs * sum(RADAU_B[j] * (jac[j] @ Y[j] + force[j]) for j in range(2))
+            z = zr[:4]
+            P, Q, R = (Pr + Pr.T) / 2, Qr, (Rr + Rr.T) / 2
+    return out
+
+
+def start_of_step_adaptive(sig: Signals, c: AdaptiveConstConfig | AdaptiveTvConfig) -> dict:
+    """The kernel's scheme before the ZOH-exact forcing, kept to show the continuous-law test
+    catches it: P, Q, R forced by Φ_f, y held at their values at t_i (they move ~10 % within
+    a step at Ts/k = 0.1), Θ̂ by backward Euler with everything at t_i."""
     scale = {"kg/s": 1.0, "g/s": 1e3, "kg/h": 3.6e3}[c.air_unit]
     n, tl, m = sig["speed_rpm"], sig["load_torque_nm"], scale * sig["air_mass_flow_kg_s"]
     J, k, ell = c.J_nm_s_per_rpm, c.k, c.ell
@@ -89,28 +160,87 @@ def ref_adaptive(sig: Signals, c: AdaptiveConstConfig | AdaptiveTvConfig) -> dic
     R = np.diag(c.K0) if isinstance(c, AdaptiveTvConfig) else None
     gamma = np.diag(c.gamma)
     theta = np.array(c.theta0, dtype=float)
-    out: dict[str, list] = {"torque_nm": [], "theta1": [], "theta2": [], "pe_lambda_min": []}
+    torque = []
     for i in range(n.size):
         y = J * (n[i] - n_f[i]) / k + t_lf[i]
-        out["torque_nm"].append(np.array([n[i], m[i]]) @ theta)
-        out["theta1"].append(theta[0])
-        out["theta2"].append(theta[1])
-        out["pe_lambda_min"].append(np.linalg.eigvalsh(P)[0])
+        torque.append(np.array([n[i], m[i]]) @ theta)
         F = np.outer(phi_f[i], phi_f[i])
-        W1 = P @ theta - Q  # TQ (46)
-        W2 = F @ theta - phi_f[i] * y  # TQ (47)
-        K = None if R is None else np.linalg.inv(R + R_FLOOR * np.diag(np.diag(R)))  # TQ (53)
+        K = None if R is None else np.linalg.inv(R + R_FLOOR * np.diag(np.diag(R)))
         G = gamma if K is None else gamma @ K
-        # backward Euler: θ⁺ = θ − Ts·G·(W1 + κW2)(θ⁺), linear in θ⁺
         A = P + c.kappa * F
         theta = np.linalg.solve(
-            np.eye(2) + TS * G @ A, theta - TS * G @ (W1 + c.kappa * W2 - A @ theta)
+            np.eye(2) + TS * G @ A, theta + TS * G @ (Q + c.kappa * phi_f[i] * y)
         )
         P = b * P + (1 - b) / ell * F
         Q = b * Q + (1 - b) / ell * phi_f[i] * y
         if R is not None:
             R = b * R + (1 - b) / ell * F
+    return {"torque_nm": np.array(torque)}
+
+
+@numba.njit(cache=False)
+def _rk4_continuous(speed, load, air, J, k, ell, g1, g2, kappa, tv, K0, theta0, substeps):
+    """RK4 with ``substeps`` steps per sample of the continuous TQ (9), (42), (45), (50)/(52),
+    (54) on held inputs, K by its Riccati equation (no floor). Per sample: UIO, dirty
+    differentiation and adaptive-law torque at t_i."""
+    x = np.zeros(14)  # N_f, τ_lf, Φ_f1, Φ_f2, P11, P12, P22, Q1, Q2, K11, K12, K22, θ1, θ2
+    x[9], x[11], x[12], x[13] = 1.0 / K0[0], 1.0 / K0[1], theta0[0], theta0[1]
+    out = np.empty((speed.size, 3))
+    h = TS / substeps
+    for i in range(speed.size):
+        N, tl, m = speed[i], load[i], air[i]
+        out[i, 0] = J * (N - x[0]) / k + x[1]
+        out[i, 1] = J * (N - x[0]) / k + tl
+        out[i, 2] = N * x[12] + m * x[13]
+        for _ in range(substeps):
+            k1 = _tq_rhs(x, N, tl, m, J, k, ell, g1, g2, kappa, tv)
+            k2 = _tq_rhs(x + 0.5 * h * k1, N, tl, m, J, k, ell, g1, g2, kappa, tv)
+            k3 = _tq_rhs(x + 0.5 * h * k2, N, tl, m, J, k, ell, g1, g2, kappa, tv)
+            k4 = _tq_rhs(x + h * k3, N, tl, m, J, k, ell, g1, g2, kappa, tv)
+            x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
     return out
+
+
+@numba.njit(cache=False)
+def _tq_rhs(x, N, tl, m, J, k, ell, g1, g2, kappa, tv):
+    nf, tlf, f1, f2, p11, p12, p22, q1, q2, k11, k12, k22, t1, t2 = x
+    y = J * (N - nf) / k + tlf
+    kf1, kf2 = k11 * f1 + k12 * f2, k12 * f1 + k22 * f2
+    e = f1 * t1 + f2 * t2 - y
+    w1 = p11 * t1 + p12 * t2 - q1 + kappa * f1 * e  # W1 + κW2, TQ (46)–(47)
+    w2 = p12 * t1 + p22 * t2 - q2 + kappa * f2 * e
+    d = np.empty(14)
+    d[0], d[1], d[2], d[3] = (N - nf) / k, (tl - tlf) / k, (N - f1) / k, (m - f2) / k
+    d[4], d[5], d[6] = -ell * p11 + f1 * f1, -ell * p12 + f1 * f2, -ell * p22 + f2 * f2
+    d[7], d[8] = -ell * q1 + f1 * y, -ell * q2 + f2 * y
+    d[9], d[10], d[11] = ell * k11 - kf1 * kf1, ell * k12 - kf1 * kf2, ell * k22 - kf2 * kf2
+    if tv:
+        d[12], d[13] = -g1 * (k11 * w1 + k12 * w2), -g2 * (k12 * w1 + k22 * w2)
+    else:
+        d[12], d[13] = -g1 * w1, -g2 * w2
+    return d
+
+
+def continuous(sig: Signals, c: UioConfig | AdaptiveConstConfig | AdaptiveTvConfig) -> np.ndarray:
+    """``(n, 3)``: UIO, dirty differentiation, adaptive law on ``sig`` by fine-step RK4."""
+    ad = c if isinstance(c, AdaptiveConstConfig | AdaptiveTvConfig) else AdaptiveConstConfig()
+    scale = {"kg/s": 1.0, "g/s": 1e3, "kg/h": 3.6e3}[ad.air_unit]
+    K0 = np.array(ad.K0 if isinstance(ad, AdaptiveTvConfig) else (1.0, 1.0))
+    return _rk4_continuous(
+        sig["speed_rpm"],
+        sig["load_torque_nm"],
+        scale * sig["air_mass_flow_kg_s"],
+        c.J_nm_s_per_rpm,
+        c.k,
+        ad.ell,
+        ad.gamma[0],
+        ad.gamma[1],
+        ad.kappa,
+        isinstance(ad, AdaptiveTvConfig),
+        K0,
+        np.array(ad.theta0),
+        100,  # 10 µs: h·λ ≈ 1 for the stiffest mode Γ1(P11 + κΦ_f1²) ≈ 10⁵ s⁻¹ (converged)
+    )
 
 
 def build(name: str, **cfg: object) -> TorqueEstimator:
@@ -155,6 +285,59 @@ def test_adaptive_kernels_match_slow_reference(name: str, cfg: dict) -> None:
     for key, series in want.items():
         scale = max(1.0, float(np.max(np.abs(series))))
         assert_allclose(got[key], series, rtol=1e-9, atol=1e-9 * scale, err_msg=key)
+
+
+@pytest.mark.parametrize("name", ["uio", "dirty"])
+def test_observer_kernels_are_the_continuous_estimators_at_the_samples(name: str) -> None:
+    """UIO and dirty differentiation are algebraic in exact ZOH filter states: the kernels
+    equal the continuous TQ (9)/(14), (23)–(24) sampled at t_i."""
+    sig = log()
+    est = build(name)
+    got = est.fit(sig).outputs["torque_nm"]
+    want = continuous(sig, est.config)[:, 0 if name == "uio" else 1]  # type: ignore[arg-type]
+    assert_allclose(got, want, rtol=0, atol=1e-9 * float(np.max(np.abs(want))))
+
+
+@pytest.mark.parametrize("kappa", [0.0, 0.1])
+@pytest.mark.parametrize("name", ["adaptive-const", "adaptive-tv"])
+def test_adaptive_kernels_follow_the_continuous_law_under_zoh(name: str, kappa: float) -> None:
+    """The kernel against RK4 of the continuous equations (K by its Riccati equation, TQ (52))
+    at 100 steps per sample. After the 0.1 s start-up (Θ̂(0) = 0 overshoots to ~10⁴ N·m) within
+    1e-3 N·m (measured ≤ 2e-4; τ̂ ≈ 70–190 N·m); the former start-of-step scheme misses by
+    0.5–3.2 N·m and fails it. In the start-up, where Θ̂ moves by up to 10³ N·m per sample,
+    within 0.2 % of max |τ̂| (measured ≤ 0.13 %: Radau IIA's O(h³) on SUBSTEPS steps)."""
+    sig = log()
+    est = build(name, kappa=kappa)
+    exact = continuous(sig, est.config)[:, 2]  # type: ignore[arg-type]
+    got = est.fit(sig).outputs["torque_nm"]
+    old = start_of_step_adaptive(sig, est.config)["torque_nm"]  # type: ignore[arg-type]
+    after = slice(100, None)
+    assert_allclose(got[after], exact[after], rtol=0, atol=1e-3)
+    assert np.max(np.abs(old[after] - exact[after])) > 0.3
+    assert np.max(np.abs(got - exact)) < 2e-3 * np.max(np.abs(exact))
+
+
+def test_noise_alone_leaves_filtered_speed_and_y_uncorrelated() -> None:
+    """Zero-mean noise on N and τ_l (variance 20, as the scenarios): in continuous time
+    E[N_f·Ṅ_f] = 0, so P and Q must see no correlation between Φ_f1 and y = J(N − N_f)/k +
+    τ_lf. The kernel's mean Q1 / mean P11 (what P⁻¹Q of TQ (45) fits to θ1) is < 5 % of J/k
+    (measured < 1 % over 100 s); Φ_f1, y held at t_i, as the former kernel integrated them,
+    give −J/k: E[N_f(t_i)·(N_i − N_f(t_i))] = −var(N_f), a correlation of −0.2."""
+    n = 100_000
+    rng = np.random.default_rng(7)
+    t = np.arange(n) * TS
+    speed, load = rng.normal(0, math.sqrt(20), n), rng.normal(0, math.sqrt(20), n)
+    sig = Signals(t, {"speed_rpm": speed, "load_torque_nm": load, "air_mass_flow_kg_s": 0 * t})
+    est = build("adaptive-const", kappa=0.0)
+    states = [s.state for s in est.run(sig, every=50)][20:]  # after 1 s (1/ℓ = 0.1 s)
+    J, k = est.config.J_nm_s_per_rpm, est.config.k
+    fitted = np.mean([s.Q[0] for s in states]) / np.mean([s.P[0, 0] for s in states])
+    assert abs(fitted) < 0.05 * J / k
+    n_f = ref_filter(speed, k)
+    y = J * (speed - n_f) / k + ref_filter(load, k)
+    held = np.mean(n_f * y) / np.mean(n_f * n_f)
+    assert held == pytest.approx(-J / k, rel=0.1)
+    assert np.corrcoef(n_f, y)[0, 1] == pytest.approx(-0.2, abs=0.02)
 
 
 def test_time_varying_law_survives_a_regressor_without_excitation() -> None:
@@ -269,16 +452,24 @@ def test_uio_beats_sliding_mode_and_dirty_differentiation(scenario: str, seed: i
         assert m["uio"]["sd"] < m[other]["sd"], (other, m)
 
 
+def seed_mean(scenario: str, key: str, metric: str) -> float:
+    return float(np.mean([scores(scenario, seed)[key][metric] for seed in SEEDS]))
+
+
 NO_PE_ON_SI = (
     "TQ Table IV: (54) with κ = 0.1 should have the lowest ISE and SD of the four adaptive "
-    "variants. On torque-si, seeds 0–4, it has ISE 442–500 N²·m²·s and SD 4.20–4.47 N·m "
-    "against 123–125 and 2.22–2.24 for (50) with κ = 0 (≈ 4× the ISE). Cause: no persistent "
-    "excitation (TQ Lemma 8). At constant speed N and ṁ_ai are proportional (λ_min/λ_max of the "
-    "diagonally scaled P ≈ 5e-8 from 15 to 30 s), so K ≈ P⁻¹ lets the speed noise, which enters "
-    "both Φ_f and y, steer Θ̂ along the unexcited direction (θ̂ ≈ (−0.3…−1.7 N·m/rpm, "
-    "3e4…2e5 N·m/(kg/s)) against the true (−0.009, 5e3)); ΦΘ̂ fits at the operating point but "
-    "spikes at the speed steps (MAE 44–194 N·m vs 20). (50) with ṁ_ai in kg/s never moves θ2 "
-    "(rate Γ2·ṁ_ai²/ℓ ≈ 3e-3 /s) and so cannot drift."
+    "variants (TQ: ISE 7.49e4 vs 1.55e5 for (50) κ = 0, SD 1.82 vs 2.62). On torque-si, seeds "
+    "0–4, it has ISE 159.5, 153.9, 150.1, 155.5, 151.1 N²·m²·s and SD 2.53, 2.48, 2.45, 2.49, "
+    "2.46 N·m against 123.9, 122.3, 122.1, 123.3, 121.8 and 2.23, 2.21, 2.21, 2.22, 2.21 for "
+    "(50) κ = 0 (≈ 1.25× the ISE; (50) κ = 0.1 is as good as (50) κ = 0). Cause: no persistent "
+    "excitation (TQ Lemma 8). At constant speed N and ṁ_ai are proportional (λ_min/λ_max of "
+    "the diagonally scaled P ≈ 6e-8 from 15 to 30 s), so K ≈ P⁻¹ lets the speed noise, which "
+    "enters both Φ_f and y, random-walk Θ̂ along the unexcited direction (θ̂1 within "
+    "±(1.6…2.1) N·m/rpm, θ̂2 within ±(1.9…2.4)e5 N·m/(kg/s), against the true −0.009 and "
+    "4e3…7.7e3); κ = 0.1 feeds W2's instantaneous noise into that walk (κ = 0: ±0.7, ±8e4). "
+    "ΦΘ̂ fits at the operating point, but errors beyond 10 N·m occur all over the window (MAE "
+    "25–80 N·m vs 14–16 for (50) κ = 0.1). (50) with ṁ_ai in kg/s never moves θ2 (rate "
+    "Γ2·ṁ_ai²/ℓ ≈ 3e-3 /s) and so cannot drift."
 )
 
 
@@ -292,7 +483,8 @@ NO_PE_ON_SI = (
 )
 def test_time_varying_gain_with_kappa_is_best_adaptive_variant(scenario: str, seed: int) -> None:
     """The issue's target from TQ Tables IV/VII: (54) with κ = 0.1 has the lowest ISE and SD.
-    (TQ Table VII itself ranks (50) with κ = 0.1 first on the rig; see the next test.)"""
+    (TQ Table VII itself ranks (50) with κ = 0.1 first on the rig; see the next test.) On
+    torque-rig, seeds 0–4: ISE 260–268, SD 3.19–3.24 against ≥ 1018 and ≥ 6.30 for the others."""
     m = scores(scenario, seed)
     best = "adaptive-tv/0.1"
     for key in ADAPTIVE:
@@ -304,11 +496,11 @@ def test_time_varying_gain_with_kappa_is_best_adaptive_variant(scenario: str, se
 @pytest.mark.xfail(
     strict=True,
     reason="TQ Table VII ranks (50) with κ = 0.1 first on the rig (ISE 3.03e5 vs 3.56e5 for "
-    "(54) κ = 0.1). On torque-rig, seeds 0–4, (50) κ = 0.1 has ISE 1596–1615, SD 7.99–8.03 "
-    "against 306–316, 3.46–3.51 for (54) κ = 0.1. Cause: Θ moves fast on our diesel "
-    "(θ2 = τ_i/ṁ_ai jumps at each fuel-demand step while ṁ_ai follows the 0.4 s turbo lag) "
-    "and (50) with ṁ_ai in kg/s adapts θ1 alone; with air_unit='kg/h', which balances TQ's "
-    "Γ = diag(0.1, 100), its ISE drops to ≈ 500, still above (54).",
+    "(54) κ = 0.1, SD 1.30 vs 1.40). On torque-rig, seeds 0–4, (50) κ = 0.1 has ISE "
+    "1328–1345, SD 7.29–7.33 against 260–268, 3.19–3.24 for (54) κ = 0.1. Cause: Θ moves fast "
+    "on our diesel (θ2 = τ_i/ṁ_ai jumps at each fuel-demand step while ṁ_ai follows the 0.4 s "
+    "turbo lag) and (50) with ṁ_ai in kg/s adapts θ1 alone; with air_unit='kg/h', which "
+    "balances TQ's Γ = diag(0.1, 100), its ISE drops to 394–405, still above (54).",
 )
 @pytest.mark.parametrize("seed", SEEDS)
 def test_constant_gain_with_kappa_is_best_on_the_rig(seed: int) -> None:
@@ -320,44 +512,88 @@ def test_constant_gain_with_kappa_is_best_on_the_rig(seed: int) -> None:
 
 
 @pytest.mark.parametrize("seed", SEEDS)
-@pytest.mark.parametrize("scenario", SCENARIOS)
-@pytest.mark.parametrize("law", ["adaptive-const", "adaptive-tv"])
+@pytest.mark.parametrize(
+    ("law", "scenario"),
+    [
+        ("adaptive-const", "torque-si"),
+        ("adaptive-const", "torque-rig"),
+        ("adaptive-tv", "torque-rig"),
+    ],
+)
 def test_kappa_reduces_the_peak_error(law: str, scenario: str, seed: int) -> None:
     """TQ §VI: W2 "reduces the peak errors at the transient points" (Tables IV, VII: MAE
-    19.2 → 14.8 and 19.7 → 12.7 in simulation, 15.4 → 9.4 and 17.3 → 9.7 on the rig)."""
+    19.2 → 14.8 and 19.7 → 12.7 in simulation, 15.4 → 9.4 and 17.3 → 9.7 on the rig). Seeds
+    0–4: (50) on torque-si 20.2–20.9 → 14.2–16.0, on torque-rig 83.3–84.0 → 48.2–48.9; (54)
+    on torque-rig 65.3–66.0 → 34.0–35.2. (54) on torque-si: next test."""
     m = scores(scenario, seed)
     assert m[f"{law}/0.1"]["mae"] < m[f"{law}/0.0"]["mae"], m
 
 
-W2_NOISE_ON_SI = (
-    "TQ Table IV: κ = 0.1 also lowers ISE and SD of (50) (1.55e5 → 1.33e5, 2.62 → 2.43). On "
-    "torque-si, seeds 0–4, it raises them slightly: ISE 122.7–125.0 → 125.0–127.9, SD "
-    "2.215–2.236 → 2.236–2.262. W2 feeds the instantaneous UIO signal y, whose speed noise "
-    "J/k·w1 ≈ 2.4 N·m SD sits at TQ Table III's level, into θ̂1, while Θ of our mean value "
-    "plant varies slowly (no fast combustion dynamics, ṁ_ai noise-free), so the smaller peaks "
-    "at the steps (MAE 20.5 → 14.5, TQ 19.2 → 14.8) do not pay for it over 25 s."
+@pytest.mark.xfail(
+    strict=True,
+    reason="TQ Table IV: κ = 0.1 lowers the MAE of (54) from 19.65 to 12.74 N·m. On torque-si "
+    "it raises it on 4 of 5 seeds and on the mean: seeds 0–4 38.2 → 64.7, 45.8 → 52.0, "
+    "31.5 → 25.0, 60.6 → 80.0, 14.0 → 47.8 (mean 38.0 → 53.9). Cause: without persistent "
+    "excitation Θ̂ random-walks along the unexcited direction (see the best-variant test) "
+    "and κ = 0.1 speeds the walk up, so the peak is set by an excursion anywhere in the "
+    "window, not at the speed steps.",
 )
+def test_kappa_reduces_the_peak_error_of_the_time_varying_law_on_si_on_average() -> None:
+    """TQ §VI's claim for (54) in simulation, on the seed-mean MAE (seeds 0–4)."""
+    assert seed_mean("torque-si", "adaptive-tv/0.1", "mae") < seed_mean(
+        "torque-si", "adaptive-tv/0.0", "mae"
+    )
 
 
 @pytest.mark.parametrize("seed", SEEDS)
-@pytest.mark.parametrize(
-    ("law", "scenario"),
-    [
-        pytest.param(
-            "adaptive-const",
-            "torque-si",
-            marks=pytest.mark.xfail(strict=True, reason=W2_NOISE_ON_SI),
-        ),
-        ("adaptive-const", "torque-rig"),
-        ("adaptive-tv", "torque-si"),
-        ("adaptive-tv", "torque-rig"),
-    ],
-)
-def test_kappa_reduces_ise_and_sd(law: str, scenario: str, seed: int) -> None:
-    """TQ Tables IV and VII: ISE and SD fall when κ goes from 0 to 0.1, for both laws."""
-    m = scores(scenario, seed)
+@pytest.mark.parametrize("law", ["adaptive-const", "adaptive-tv"])
+def test_kappa_reduces_ise_and_sd_on_the_rig(law: str, seed: int) -> None:
+    """TQ Table VII: ISE and SD fall when κ goes from 0 to 0.1, for both laws. Seeds 0–4:
+    (50) ISE 4230–4268 → 1328–1345, SD 13.01–13.06 → 7.29–7.33; (54) ISE 1019–1042 →
+    260–268, SD 6.31–6.37 → 3.19–3.24."""
+    m = scores("torque-rig", seed)
     for metric in ("ise", "sd"):
         assert m[f"{law}/0.1"][metric] < m[f"{law}/0.0"][metric], (metric, m)
+
+
+W2_ON_SI = {
+    "adaptive-const": (
+        "TQ Table IV: κ = 0.1 lowers ISE and SD of (50) (1.55e5 → 1.33e5, 2.62 → 2.43). On "
+        "torque-si it makes no difference: seeds 0–4 ISE 123.9 → 123.5, 122.3 → 124.2, "
+        "122.1 → 121.4, 123.3 → 123.0, 121.8 → 122.3 (−0.6 … +1.5 %; lower on seeds 0, 2, 3), "
+        "SD 2.227 → 2.223, 2.212 → 2.229, 2.210 → 2.203, 2.219 → 2.217, 2.206 → 2.212; "
+        "seed-means ISE 122.69 → 122.90, SD 2.2149 → 2.2169. W2 feeds the instantaneous UIO "
+        "signal y, whose speed noise J/k·w1 ≈ 2.4 N·m SD sits at TQ Table III's level, into "
+        "θ̂1, while Θ of our mean value plant varies slowly (no fast combustion dynamics, "
+        "ṁ_ai noise-free), so the smaller peaks at the steps (MAE 20.5 → 15.0, TQ 19.2 → "
+        "14.8) do not pay for it over 25 s."
+    ),
+    "adaptive-tv": (
+        "TQ Table IV: κ = 0.1 lowers ISE and SD of (54) (1.72e5 → 7.49e4, 2.76 → 1.82). On "
+        "torque-si it raises them on 4 of 5 seeds and on the mean: seeds 0–4 ISE "
+        "128.0 → 159.5, 153.2 → 153.9, 133.8 → 150.1, 175.4 → 155.5, 110.9 → 151.1 (mean "
+        "140.3 → 154.0), SD 2.263 → 2.525, 2.475 → 2.481, 2.313 → 2.450, 2.649 → 2.494, "
+        "2.106 → 2.458 (mean 2.361 → 2.482). Cause: without persistent excitation Θ̂ "
+        "random-walks along the unexcited direction (see the best-variant test); κ = 0.1 "
+        "feeds W2's instantaneous noise into the walk, which evens out the seeds (ISE "
+        "150–160 against 111–175) but raises the level."
+    ),
+}
+
+
+@pytest.mark.parametrize(
+    "law",
+    [
+        pytest.param(law, marks=pytest.mark.xfail(strict=True, reason=reason))
+        for law, reason in W2_ON_SI.items()
+    ],
+)
+def test_kappa_reduces_ise_and_sd_on_si_on_average(law: str) -> None:
+    """TQ Table IV's κ effect in simulation, on the seed-means (seeds 0–4): the per-seed
+    outcome is mixed for both laws (reasons)."""
+    for metric in ("ise", "sd"):
+        kappa_01 = seed_mean("torque-si", f"{law}/0.1", metric)
+        assert kappa_01 < seed_mean("torque-si", f"{law}/0.0", metric), metric
 
 
 def test_paper_diagonal_gain_destabilises_the_time_varying_law() -> None:
