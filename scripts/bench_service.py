@@ -154,6 +154,14 @@ def poller(base: str, paths: list[str], stop: threading.Event, out: list[float])
                 out.append(time.perf_counter() - t0)
 
 
+def peak_rss_mb(pid: int) -> float:
+    """The API process's peak resident memory (VmHWM), MiB: the upload is parsed there."""
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return round(int(line.split()[1]) / 1024, 1)
+    return float("nan")
+
+
 def latency_figures(phase: str, latencies: list[float]) -> dict[str, float]:
     lat_ms = sorted(1000 * x for x in latencies)
     if not lat_ms:
@@ -225,6 +233,7 @@ def main() -> None:
                 "total_s": round(t2 - t0, 2),
                 "rows_per_s": round(args.rows / (t2 - t0)),
                 "versions": done["n_versions"],
+                "server_peak_rss_mb": peak_rss_mb(proc.pid),
                 **latency_figures("bulk", bulk_latencies),
             }
 
