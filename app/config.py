@@ -57,6 +57,22 @@ class Settings(BaseSettings):
         0.2, gt=0, le=10, description="How often a running run checks for cancel requests."
     )
     seed_demo: bool = Field(True, description="Seed a demo dataset and run on an empty DB.")
+    heartbeat_s: float = Field(
+        2.0, gt=0, le=60, description="How often an executing run proves it is alive."
+    )
+    heartbeat_timeout_s: float = Field(
+        30.0,
+        gt=0,
+        le=3600,
+        description="A running run silent this long is a lost attempt (its worker died).",
+    )
+    lost_run_policy: Literal["interrupt", "requeue"] = Field(
+        "interrupt",
+        description="A lost attempt leaves the run interrupted (resume by hand) or queued.",
+    )
+    max_lost_attempts: int = Field(
+        3, ge=1, le=100, description="Lost attempts after which a run fails (a poison run)."
+    )
 
     @field_validator("cors_origins", mode="before")
     @classmethod
@@ -78,6 +94,15 @@ class Settings(BaseSettings):
             raise ValueError(
                 f"require_auth=false is not allowed when listening on {self.host!r} "
                 "(beyond loopback); create a token with `mapwise token create`"
+            )
+        return self
+
+    @model_validator(mode="after")
+    def _heartbeat_within_timeout(self) -> Settings:
+        if self.heartbeat_timeout_s < 3 * self.heartbeat_s:
+            raise ValueError(
+                f"heartbeat_timeout_s ({self.heartbeat_timeout_s:g}) must be at least 3 "
+                f"heartbeats (heartbeat_s = {self.heartbeat_s:g})"
             )
         return self
 

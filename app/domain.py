@@ -61,6 +61,10 @@ class Run:
     produces_map: bool
     base_map_id: int | None
     stop_request: str | None
+    attempt: int
+    lost_attempts: int
+    owner: str | None
+    heartbeat_at: datetime | None
     created_at: datetime
     started_at: datetime | None
     finished_at: datetime | None

@@ -61,6 +61,14 @@ class ConflictError(AppError):
     status = 409
 
 
+class SupersededError(AppError):
+    """A worker's attempt at a run is no longer the live one (a newer attempt claimed it):
+    the worker stops without writing anything more."""
+
+    code = "superseded"
+    status = 409
+
+
 class PayloadTooLargeError(AppError):
     code = "payload_too_large"
     status = 413

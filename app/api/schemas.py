@@ -127,6 +127,9 @@ class RunOut(BaseModel):
     rejected: dict[str, int]
     n_versions: int
     base_map_id: int | None
+    attempt: int = Field(description="Executions so far; each checks its number on every write.")
+    lost_attempts: int = Field(description="Attempts whose worker died (failed after a few).")
+    heartbeat_at: datetime | None = Field(description="Last sign of life of the attempt.")
 
     @classmethod
     def of(cls, r: Run) -> RunOut:
@@ -152,6 +155,9 @@ class RunOut(BaseModel):
             rejected=r.rejected,
             n_versions=r.n_versions,
             base_map_id=r.base_map_id,
+            attempt=r.attempt,
+            lost_attempts=r.lost_attempts,
+            heartbeat_at=r.heartbeat_at,
         )
 
 

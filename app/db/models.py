@@ -22,6 +22,7 @@ from sqlalchemy import (
     String,
     Text,
     UniqueConstraint,
+    text,
 )
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
@@ -86,6 +87,12 @@ class RunRow(Base):
     produces_map: Mapped[bool] = mapped_column(Boolean)
     base_map_id: Mapped[int | None] = mapped_column(ForeignKey("base_maps.id", ondelete="SET NULL"))
     stop_request: Mapped[str | None] = mapped_column(String(16))
+    # Each execution is an attempt: claim() increments the number and every write of the
+    # attempt checks it (fencing); the heartbeat tells the sweep whether the attempt lives.
+    attempt: Mapped[int] = mapped_column(Integer, default=0, server_default=text("0"))
+    heartbeat_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
+    owner: Mapped[str | None] = mapped_column(String(200))  # executor of the attempt
+    lost_attempts: Mapped[int] = mapped_column(Integer, default=0, server_default=text("0"))
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
     started_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
     finished_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))

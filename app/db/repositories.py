@@ -3,7 +3,7 @@ objects (:mod:`app.domain`) and never commit; the caller's unit of work does."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from datetime import UTC, datetime
 from typing import Any
 
@@ -34,7 +34,7 @@ from app.domain import (
     Series,
     VersionSummary,
 )
-from app.errors import ConflictError, NotFoundError
+from app.errors import ConflictError, NotFoundError, SupersededError
 
 MAX_ID = 2**31 - 1
 
@@ -220,6 +220,10 @@ class RunRepo:
             produces_map=row.produces_map,
             base_map_id=row.base_map_id,
             stop_request=row.stop_request,
+            attempt=row.attempt,
+            lost_attempts=row.lost_attempts,
+            owner=row.owner,
+            heartbeat_at=aware(row.heartbeat_at),
             created_at=aware(row.created_at),  # type: ignore[arg-type]
             started_at=aware(row.started_at),
             finished_at=aware(row.finished_at),
@@ -281,14 +285,62 @@ class RunRepo:
             out.update({run_id: int(n) for run_id, n in self.s.execute(q)})
         return out
 
-    def claim(self, run_id: int, *, statuses: tuple[str, ...] = ("queued",)) -> bool:
-        """Move a run from one of ``statuses`` to ``running``; ``False`` if it was not there."""
+    def claim(
+        self, run_id: int, *, owner: str, statuses: tuple[str, ...] = ("queued",)
+    ) -> int | None:
+        """Start a new attempt: move the run from one of ``statuses`` to ``running`` with the
+        next attempt number, which is returned; ``None`` if the run was not in ``statuses``.
+        Claiming a ``running`` run supersedes its attempt (a Dask retry after its worker was
+        lost): the old attempt's next fenced write fails, so it can never overwrite."""
+        now = utcnow()
         result = self.s.execute(
             update(RunRow)
             .where(RunRow.id == run_id, RunRow.status.in_(statuses))
-            .values(status="running", started_at=utcnow(), stop_request=None, error=None)
+            .values(
+                status="running",
+                started_at=now,
+                heartbeat_at=now,
+                owner=owner,
+                attempt=RunRow.attempt + 1,
+                stop_request=None,
+                error=None,
+            )
         )
-        return result.rowcount == 1  # type: ignore[attr-defined]
+        if result.rowcount != 1:  # type: ignore[attr-defined]
+            return None
+        return int(self.s.scalar(select(RunRow.attempt).where(RunRow.id == run_id)) or 0)
+
+    def fence(self, run_id: int, attempt: int) -> None:
+        """Check, inside the caller's transaction, that ``attempt`` is still the run's live
+        attempt, and record a heartbeat; raise :class:`SupersededError` otherwise. On
+        PostgreSQL the update locks the row until commit, so a concurrent claim waits for
+        this transaction and then sees its writes."""
+        result = self.s.execute(
+            update(RunRow)
+            .where(RunRow.id == run_id, RunRow.attempt == attempt, RunRow.status == "running")
+            .values(heartbeat_at=utcnow())
+        )
+        if result.rowcount != 1:  # type: ignore[attr-defined]
+            raise SupersededError(f"run {run_id}: attempt {attempt} is no longer the live one")
+
+    def stale_running(self, *, stale_before: datetime) -> list[Run]:
+        """Runs ``running`` whose attempt has not heartbeated since ``stale_before``
+        (including an attempt that died before its first heartbeat)."""
+        q = select(RunRow).where(
+            RunRow.status == "running",
+            func.coalesce(RunRow.heartbeat_at, RunRow.started_at) < stale_before,
+        )
+        return [self._run(row, {}, 0) for row in self.s.scalars(q)]
+
+    def running_owned_by(self, owners: Collection[str]) -> list[int]:
+        if not owners:
+            return []
+        q = select(RunRow.id).where(RunRow.status == "running", RunRow.owner.in_(list(owners)))
+        return list(self.s.scalars(q.order_by(RunRow.id)))
+
+    def running_owners(self) -> list[str]:
+        q = select(RunRow.owner).where(RunRow.status == "running").distinct()
+        return [o for o in self.s.scalars(q) if o]
 
     def set_status(
         self,
@@ -308,10 +360,13 @@ class RunRepo:
         return self.s.execute(stmt.values(**values)).rowcount == 1  # type: ignore[attr-defined]
 
     def reset_for_resume(self, run_id: int) -> None:
+        """Queued again by a user's resume: the count of lost attempts starts afresh."""
         self.s.execute(
             update(RunRow)
             .where(RunRow.id == run_id)
-            .values(status="queued", error=None, finished_at=None, stop_request=None)
+            .values(
+                status="queued", error=None, finished_at=None, stop_request=None, lost_attempts=0
+            )
         )
 
     def progress(
@@ -337,20 +392,46 @@ class RunRepo:
         q = select(RunRow.id).where(RunRow.status == status).order_by(RunRow.id)
         return list(self.s.scalars(q))
 
-    def mark_running_interrupted(self) -> list[int]:
-        """The start-up sweep: runs left ``running`` by a dead server become ``interrupted``."""
-        ids = self.ids_with_status("running")
-        if ids:
+    def lose_attempt(
+        self, run_id: int, *, reason: str, requeue: bool, max_lost: int, attempt: int | None = None
+    ) -> str | None:
+        """The live attempt of a ``running`` run died (its worker was killed, ran out of
+        memory, or stopped heartbeating). The run is re-queued (``requeue``) or
+        ``interrupted`` (resumable); after ``max_lost`` lost attempts it is ``failed`` with
+        the reason, so a poison run is never redelivered forever. Returns the new status,
+        or ``None`` when the run was not running (or ``attempt`` is no longer its own)."""
+        q = select(RunRow).where(RunRow.id == run_id, RunRow.status == "running")
+        if attempt is not None:
+            q = q.where(RunRow.attempt == attempt)
+        row = self.s.scalars(q.with_for_update()).first()
+        if row is None:
+            return None
+        row.lost_attempts += 1
+        row.stop_request = None
+        if row.lost_attempts >= max_lost:
+            row.status, row.finished_at = "failed", utcnow()
+            row.error = f"{reason}; given up after {row.lost_attempts} lost attempts"
+        elif requeue:
+            row.status, row.error = "queued", None
+        else:
+            row.status, row.error = "interrupted", f"{reason}; resume the run"
+        self.s.flush()
+        return row.status
+
+    def interrupt(self, run_ids: Collection[int], message: str) -> list[int]:
+        """``running`` runs among ``run_ids`` become ``interrupted`` (resumable)."""
+        ids = list(run_ids)
+        if not ids:
+            return []
+        q = select(RunRow.id).where(RunRow.id.in_(ids), RunRow.status == "running")
+        hit = list(self.s.scalars(q))
+        if hit:
             self.s.execute(
                 update(RunRow)
-                .where(RunRow.id.in_(ids))
-                .values(
-                    status="interrupted",
-                    error="the server stopped while the run was executing; resume it",
-                    stop_request=None,
-                )
+                .where(RunRow.id.in_(hit))
+                .values(status="interrupted", error=message, stop_request=None)
             )
-        return ids
+        return hit
 
 
 # --- map versions and results ----------------------------------------------------------------

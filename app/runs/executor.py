@@ -1,10 +1,16 @@
 """The run executor: a process pool (spawn) fed with run ids, and the pump that carries
 worker messages to the live hub on the event loop.
 
-At start-up it sweeps the database: runs left ``running`` by a server that died become
-``interrupted`` (resumable), runs still ``queued`` are submitted again. At shutdown it asks
-its running runs to stop (they persist a version and end ``interrupted``), so nothing is
-lost that a resume cannot recover.
+Each executor has an owner id (host, pid and process start time) that its workers write into
+the runs they claim. At start-up it sweeps the database: runs whose owner was a server
+process on this host that no longer exists lost their attempt at once; runs still ``queued``
+are submitted again. Every ``heartbeat_timeout_s / 2`` the sweeper finds running attempts
+that have not heartbeated for ``heartbeat_timeout_s`` (any owner: a server on another host
+that died, an attempt that died before its first heartbeat). A lost attempt is handled by
+:meth:`RunRepo.lose_attempt` (interrupted or re-queued by policy, failed after
+``max_lost_attempts``). At shutdown it asks its own running runs to stop (they persist a
+version and end ``interrupted``), so nothing is lost that a resume cannot recover, and
+another server's runs on a shared database are left alone.
 """
 
 from __future__ import annotations
@@ -15,10 +21,13 @@ import logging
 import multiprocessing
 import os
 import queue as queue_module
+import socket
 import threading
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
+from datetime import UTC, datetime, timedelta
 from functools import partial
+from pathlib import Path
 from typing import Any
 
 from app.config import Settings
@@ -29,6 +38,34 @@ from app.runs.worker import WorkerContext, execute_in_pool, init_pool_worker, wa
 
 log = logging.getLogger("mapwise.runs")
 SHUTDOWN_WAIT_S = 15.0
+LOCAL = "local"
+
+
+def _start_time(pid: int) -> str | None:
+    """The process's start time in clock ticks since boot (/proc), or ``None`` if it is gone."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    return stat.rsplit(")", 1)[1].split()[19]
+
+
+def local_owner(pid: int | None = None) -> str:
+    """``local:<host>:<pid>:<start time>``: unique even when a pid is reused."""
+    pid = os.getpid() if pid is None else pid
+    return f"{LOCAL}:{socket.gethostname()}:{pid}:{_start_time(pid) or '?'}"
+
+
+def dead_local_owner(owner: str) -> bool:
+    """An owner that was a process on this host which no longer exists."""
+    parts = owner.split(":")
+    if len(parts) != 4 or parts[0] != LOCAL or parts[1] != socket.gethostname():
+        return False
+    try:
+        pid = int(parts[2])
+    except ValueError:
+        return False
+    return _start_time(pid) != parts[3]
 
 
 class RunExecutor:
@@ -36,6 +73,7 @@ class RunExecutor:
         self.settings = settings
         self.db = db
         self.hub = hub
+        self.owner = local_owner()
         self.context = WorkerContext(
             database_url=db.url,
             live_fps=settings.live_fps,
@@ -43,6 +81,8 @@ class RunExecutor:
             cancel_poll_s=settings.cancel_poll_s,
             version_fraction=settings.version_fraction,
             parent_pid=os.getpid(),
+            owner=self.owner,
+            heartbeat_s=settings.heartbeat_s,
         )
         self._mp = multiprocessing.get_context("spawn")
         self._queue: Any = None
@@ -52,6 +92,7 @@ class RunExecutor:
         self._stopping = threading.Event()
         self._lock = threading.Lock()
         self._futures: dict[int, Future[str]] = {}
+        self._sweeper: threading.Thread | None = None
 
     # -- lifecycle ----------------------------------------------------------------------------
 
@@ -62,14 +103,19 @@ class RunExecutor:
         self._pool = self._new_pool()
         self._pump = threading.Thread(target=self._pump_messages, name="mapwise-pump", daemon=True)
         self._pump.start()
-        with self.db.write() as s:
+        with self.db.read() as s:
             runs = RunRepo(s)
-            interrupted = runs.mark_running_interrupted()
-            queued = runs.ids_with_status("queued")
-        if interrupted:
-            log.warning("runs %s were left running by a stopped server: interrupted", interrupted)
+            dead = [o for o in runs.running_owners() if dead_local_owner(o)]
+            orphans = runs.running_owned_by(dead)
+        for run_id in orphans:
+            self.lose(run_id, None, "the server stopped while the run was executing")
+        self.sweep()
+        with self.db.read() as s:
+            queued = RunRepo(s).ids_with_status("queued")
         for run_id in queued:
             self.submit(run_id)
+        self._sweeper = threading.Thread(target=self._sweep_loop, name="mapwise-sweep", daemon=True)
+        self._sweeper.start()
 
     def _new_pool(self) -> ProcessPoolExecutor:
         pool = ProcessPoolExecutor(
@@ -103,9 +149,11 @@ class RunExecutor:
             threading.Thread(target=_wait, daemon=True).start()
             if not done.wait(SHUTDOWN_WAIT_S):
                 log.warning("run workers did not stop within %s s", SHUTDOWN_WAIT_S)
-        with self.db.write() as s:
-            RunRepo(s).mark_running_interrupted()
         self._stopping.set()
+        with self.db.write() as s:
+            runs = RunRepo(s)
+            mine = runs.running_owned_by([self.owner])
+            runs.interrupt(mine, "the server was stopped while the run was executing; resume it")
         if self._pump is not None:
             self._pump.join(timeout=2.0)
         if self._queue is not None:
@@ -137,31 +185,74 @@ class RunExecutor:
         if exc is None:
             return
         log.error("run %s: its worker failed: %r", run_id, exc)
-        broken = isinstance(exc, BrokenProcessPool)
+        if not isinstance(exc, BrokenProcessPool):
+            message = f"the worker process failed: {type(exc).__name__}: {exc}"
+            try:
+                with self.db.write() as s:
+                    changed = RunRepo(s).set_status(
+                        run_id, "failed", only_if=("running",), error=message, finished=True
+                    )
+            except Exception:  # the database may be gone at shutdown
+                return
+            if changed:
+                self._deliver(
+                    {"kind": "status", "run_id": run_id, "status": "failed", "error": message}
+                )
+            return
         # A dead worker process (killed, out of memory) takes the whole pool with it: its
-        # runs are interrupted like a killed server's and resume from their last version.
-        status = "interrupted" if broken else "failed"
-        message = f"the worker process failed: {type(exc).__name__}: {exc}"
-        if broken:
-            message = "a run worker process died (killed or out of memory); resume the run"
-        if broken and not self._stopping.is_set():
+        # runs lost their attempt; a run the dead pool never started is simply queued again.
+        if not self._stopping.is_set():
             with self._lock:
                 if self._pool is not None and self._pool._broken:  # type: ignore[attr-defined]
                     self._pool = self._new_pool()
         try:
-            with self.db.write() as s:
-                runs = RunRepo(s)
-                # a run the dead pool never started is simply queued again
-                requeue = broken and runs.get(run_id).status == "queued"
-                changed = not requeue and runs.set_status(
-                    run_id, status, only_if=("running",), error=message, finished=True
-                )
-        except Exception:  # the database may be gone at shutdown
+            with self.db.read() as s:
+                never_started = RunRepo(s).get(run_id).status == "queued"
+        except Exception:
             return
-        if requeue and not self._stopping.is_set():
+        if never_started:
+            if not self._stopping.is_set():
+                self.submit(run_id)
+            return
+        self.lose(run_id, None, "a run worker process died (killed or out of memory)")
+
+    def lose(self, run_id: int, attempt: int | None, reason: str) -> None:
+        """The run's live attempt died: interrupted, re-queued (and submitted) or failed."""
+        try:
+            with self.db.write() as s:
+                status = RunRepo(s).lose_attempt(
+                    run_id,
+                    reason=reason,
+                    requeue=self.settings.lost_run_policy == "requeue",
+                    max_lost=self.settings.max_lost_attempts,
+                    attempt=attempt,
+                )
+                error = RunRepo(s).get(run_id).error if status else None
+        except Exception:  # the database may be gone at shutdown
+            log.exception("run %s: could not record its lost attempt", run_id)
+            return
+        if status is None:
+            return
+        log.warning("run %s lost its attempt (%s): now %s", run_id, reason, status)
+        self._deliver({"kind": "status", "run_id": run_id, "status": status, "error": error})
+        if status == "queued" and not self._stopping.is_set():
             self.submit(run_id)
-        elif changed:
-            self._deliver({"kind": "status", "run_id": run_id, "status": status, "error": message})
+
+    def sweep(self) -> list[int]:
+        """Running attempts silent for ``heartbeat_timeout_s`` lost their worker."""
+        stale_before = datetime.now(UTC) - timedelta(seconds=self.settings.heartbeat_timeout_s)
+        with self.db.read() as s:
+            stale = RunRepo(s).stale_running(stale_before=stale_before)
+        for run in stale:
+            self.lose(run.id, run.attempt, "the run's worker stopped heartbeating")
+        return [r.id for r in stale]
+
+    def _sweep_loop(self) -> None:
+        while not self._stopping.wait(self.settings.heartbeat_timeout_s / 2):
+            try:
+                self.sweep()
+            except Exception:  # the database may be down for a while: sweep again later
+                log.exception("the lost-run sweep failed")
 
     def is_active(self, run_id: int) -> bool:
         with self._lock:

@@ -17,15 +17,17 @@ import math
 import os
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from sqlalchemy.orm import Session
 
 from app.db.engine import Database
 from app.db.repositories import DatasetRepo, MetricRepo, RunRepo, VersionRepo
 from app.domain import Dataset, ResumePoint, Run, Series
+from app.errors import SupersededError
 from app.runs.states import dump_state, load_state
 from app.services.datasets import Truth, unpack_signals, unpack_truth
 from app.services.decimate import finite_or_none, nested_or_none, stride_decimate
@@ -55,6 +57,37 @@ class WorkerContext:
     cancel_poll_s: float = 0.2
     version_fraction: float = 0.1
     parent_pid: int | None = None  # exit when this process is gone (orphaned by kill -9)
+    owner: str = "local"  # the executor whose attempt this is (runs.owner)
+    heartbeat_s: float = 2.0  # an executing attempt proves it lives this often
+    take_over: bool = False  # claim a run left running by a dead attempt (a Dask retry)
+
+
+class Heartbeat:
+    """A thread that fences (and so heartbeats) the attempt every ``interval_s`` while it
+    executes, independent of how long a chunk or a paced sleep takes. It stops on its own
+    once the attempt is superseded (the run's next write then raises)."""
+
+    def __init__(self, db: Database, run_id: int, attempt: int, interval_s: float) -> None:
+        self.db, self.run_id, self.attempt, self.interval_s = db, run_id, attempt, interval_s
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._beat, name="mapwise-heartbeat", daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5.0)
+
+    def _beat(self) -> None:
+        while not self._stop.wait(self.interval_s):
+            try:
+                with self.db.write() as s:
+                    RunRepo(s).fence(self.run_id, self.attempt)
+            except SupersededError:
+                return
+            except Exception:  # a database hiccup: the next beat tries again
+                continue
 
 
 class StopRun(Exception):  # noqa: N818 - control flow, not an error
@@ -164,10 +197,23 @@ class RunSession:
     # -- lifecycle ----------------------------------------------------------------------------
 
     def execute(self) -> str:
+        statuses = ("queued", "running") if self.ctx.take_over else ("queued",)
         with self.db.write() as s:
-            if not RunRepo(s).claim(self.run_id):
-                return "skipped"
-        self._status("running", None)
+            attempt = RunRepo(s).claim(self.run_id, owner=self.ctx.owner, statuses=statuses)
+        if attempt is None:
+            return "skipped"  # finished, cancelled or taken by another attempt meanwhile
+        self.attempt = attempt
+        heartbeat = Heartbeat(self.db, self.run_id, attempt, self.ctx.heartbeat_s)
+        heartbeat.start()
+        try:
+            self._status("running", None)
+            return self._execute()
+        except SupersededError:
+            return "superseded"  # a newer attempt owns the run: write nothing more
+        finally:
+            heartbeat.stop()
+
+    def _execute(self) -> str:
         try:
             self._prepare()
             self._loop()
@@ -175,6 +221,8 @@ class RunSession:
         except StopRun as stop:
             self._finish(stop.status, stop.error)
             return stop.status
+        except SupersededError:
+            raise
         except Exception as exc:  # any failure is the run's, stored with it
             message = " ".join(f"{type(exc).__name__}: {exc}".split())
             if hasattr(exc, "message"):
@@ -182,8 +230,15 @@ class RunSession:
             self._finish("failed", message)
             return "failed"
 
-    def _finish(self, status: str, error: str | None) -> None:
+    @contextlib.contextmanager
+    def _write(self) -> Iterator[Session]:
+        """A write transaction of this attempt: fenced by its number (see RunRepo.fence)."""
         with self.db.write() as s:
+            RunRepo(s).fence(self.run_id, self.attempt)
+            yield s
+
+    def _finish(self, status: str, error: str | None) -> None:
+        with self._write() as s:
             RunRepo(s).set_status(
                 self.run_id, status, only_if=("running",), error=error, finished=True
             )
@@ -227,7 +282,7 @@ class RunSession:
         self.state: Any = None
         if self.resume is not None:
             self._restore(self.resume)
-        with self.db.write() as s:
+        with self._write() as s:
             VersionRepo(s).delete_after(self.run_id, self.p.version_sample)
 
     def _prepare_gates(self) -> None:
@@ -375,7 +430,7 @@ class RunSession:
     def _check_stop(self, snap: Snapshot) -> None:
         now = time.monotonic()
         if now - self.p.last_db_write >= PROGRESS_EVERY_S:
-            with self.db.write() as s:
+            with self._write() as s:
                 RunRepo(s).progress(
                     self.run_id,
                     sample=snap.sample,
@@ -417,7 +472,7 @@ class RunSession:
         a, z = self.p.version_sample, snap.sample
         segment = {name: values[a:z] for name, values in self.outputs.items()}
         segment["__status__"] = self.status[a:z]
-        with self.db.write() as s:
+        with self._write() as s:
             VersionRepo(s).add(**self._version_fields(snap, final=final, segment=segment))
             RunRepo(s).progress(
                 self.run_id,
@@ -455,7 +510,7 @@ class RunSession:
         a, z = self.p.version_sample, snap.sample
         segment = {name: values[a:z] for name, values in self.outputs.items()}
         segment["__status__"] = self.status[a:z]
-        with self.db.write() as s:
+        with self._write() as s:
             VersionRepo(s).add(**self._version_fields(snap, final=True, segment=segment))
             MetricRepo(s).replace(self.run_id, metrics, series)
             runs = RunRepo(s)

@@ -12,6 +12,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.cli import main as cli_main
+from app.db.migrate import head_revision
 from tests.app.service.helpers import (
     TABLE,
     TRUE_MAP,
@@ -34,7 +35,7 @@ def test_health_names_backend_and_revision(client: TestClient, backend: str) -> 
     body = client.get("/api/health").json()
     assert body["status"] == "ok"
     assert body["database"] == backend
-    assert body["revision"] == "0002"
+    assert body["revision"] == head_revision()
 
 
 def test_upload_returns_the_contract_fields(client: TestClient) -> None:

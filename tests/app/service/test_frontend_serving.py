@@ -10,10 +10,16 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.api.routers.frontend import FRONTEND_DIR
+from app.resources import resource_dir
 
-pytestmark = pytest.mark.skipif(
-    not (FRONTEND_DIR / "index.html").is_file(), reason="frontend/index.html not built yet"
-)
+
+def test_the_dashboard_is_installed() -> None:
+    """The dashboard ships with the app: a missing page is a failure, not a skip."""
+    frontend = resource_dir("frontend")
+    assert frontend == FRONTEND_DIR
+    assert (frontend / "index.html").is_file(), f"{frontend}/index.html is missing"
+    assert (frontend / "js" / "main.js").is_file()
+    assert (frontend / "css" / "app.css").is_file()
 
 
 @pytest.mark.parametrize("route", ["/datasets", "/runs/new", "/runs/12", "/compare", "/versions"])
