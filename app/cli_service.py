@@ -38,6 +38,15 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     serve.add_argument("--port", type=int, help="TCP port (default 8000, MAPWISE_PORT)")
     _database_arg(serve)
     serve.add_argument("--workers", type=int, help="run worker processes (MAPWISE_RUN_WORKERS)")
+    serve.add_argument(
+        "--executor",
+        choices=["local", "dask"],
+        help="where runs execute: local process pool (default) or a Dask cluster "
+        "(MAPWISE_EXECUTOR; needs PostgreSQL)",
+    )
+    serve.add_argument(
+        "--dask-address", help="Dask scheduler, tcp://host:8786 (MAPWISE_DASK_ADDRESS)"
+    )
     serve.add_argument("--no-demo", action="store_true", help="do not seed an empty database")
     serve.add_argument("--log-level", default="info", choices=["debug", "info", "warning"])
     serve.set_defaults(handler=_cmd_serve)
@@ -98,6 +107,8 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         host=args.host,
         port=args.port,
         run_workers=args.workers,
+        executor=args.executor,
+        dask_address=args.dask_address,
         seed_demo=False if args.no_demo else None,
     )
     try:

@@ -57,6 +57,17 @@ class Settings(BaseSettings):
         0.2, gt=0, le=10, description="How often a running run checks for cancel requests."
     )
     seed_demo: bool = Field(True, description="Seed a demo dataset and run on an empty DB.")
+    executor: Literal["local", "dask"] = Field(
+        "local",
+        description="Where runs execute: a local process pool, or a Dask distributed cluster "
+        "sharing the PostgreSQL database.",
+    )
+    dask_address: str | None = Field(
+        None, description="Dask scheduler address (tcp://host:8786) when executor=dask."
+    )
+    dask_timeout_s: float = Field(
+        30.0, gt=0, le=600, description="How long to wait for the Dask scheduler at start-up."
+    )
     heartbeat_s: float = Field(
         2.0, gt=0, le=60, description="How often an executing run proves it is alive."
     )
@@ -95,6 +106,17 @@ class Settings(BaseSettings):
                 f"require_auth=false is not allowed when listening on {self.host!r} "
                 "(beyond loopback); create a token with `mapwise token create`"
             )
+        return self
+
+    @model_validator(mode="after")
+    def _dask_needs_an_address_and_a_shared_database(self) -> Settings:
+        if self.executor == "dask":
+            if not self.dask_address:
+                raise ValueError("executor=dask needs dask_address (tcp://scheduler:8786)")
+            if not self.database_url.startswith("postgresql"):
+                raise ValueError(
+                    "executor=dask needs a database its workers share: a postgresql:// URL"
+                )
         return self
 
     @model_validator(mode="after")

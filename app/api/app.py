@@ -24,7 +24,7 @@ from app.db.engine import Database
 from app.db.migrate import check_schema, upgrade
 from app.errors import PayloadTooLargeError, install_error_handlers
 from app.logs import install_redaction
-from app.runs.executor import RunExecutor
+from app.runs.executor import RunExecutor, make_executor
 from app.runs.hub import LiveHub
 from app.services.base_maps import BaseMapService
 from app.services.datasets import DatasetService
@@ -58,7 +58,7 @@ def create_app(settings: Settings | None = None, *, execute_runs: bool = True) -
         revision = await asyncio.to_thread(prepare_database, settings)
         db = Database(settings.database_url)
         hub = LiveHub()
-        executor = RunExecutor(settings, db, hub) if execute_runs else None
+        executor = make_executor(settings, db, hub) if execute_runs else None
         app.state.services = Services(
             settings=settings,
             db=db,
@@ -70,10 +70,12 @@ def create_app(settings: Settings | None = None, *, execute_runs: bool = True) -
             tokens=TokenService(db),
             revision=revision,
         )
-        if executor is not None:
+        if isinstance(executor, RunExecutor):
             # In the loop's own thread: the workers' parent-death signal is tied to the
             # thread that spawns them, and this one lives as long as the server.
             executor.start(asyncio.get_running_loop())
+        elif executor is not None:  # connecting to a scheduler blocks: not on the loop
+            await asyncio.to_thread(executor.start, asyncio.get_running_loop())
         try:
             yield
         finally:

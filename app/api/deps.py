@@ -11,7 +11,7 @@ from starlette.requests import HTTPConnection
 from app.config import Settings
 from app.db.engine import Database
 from app.errors import UnauthorizedError
-from app.runs.executor import RunExecutor
+from app.runs.executor import Executor
 from app.runs.hub import LiveHub
 from app.services.base_maps import BaseMapService
 from app.services.datasets import DatasetService
@@ -24,7 +24,7 @@ class Services:
     settings: Settings
     db: Database
     hub: LiveHub
-    executor: RunExecutor | None
+    executor: Executor | None
     datasets: DatasetService
     runs: RunService
     base_maps: BaseMapService

@@ -28,7 +28,7 @@ from concurrent.futures.process import BrokenProcessPool
 from datetime import UTC, datetime, timedelta
 from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from app.config import Settings
 from app.db.engine import Database
@@ -254,11 +254,6 @@ class RunExecutor:
             except Exception:  # the database may be down for a while: sweep again later
                 log.exception("the lost-run sweep failed")
 
-    def is_active(self, run_id: int) -> bool:
-        with self._lock:
-            future = self._futures.get(run_id)
-        return future is not None and not future.done()
-
     # -- messages -------------------------------------------------------------------------------
 
     def _pump_messages(self) -> None:
@@ -281,3 +276,22 @@ class RunExecutor:
     def deliver_local(self, message: dict[str, Any]) -> None:
         """A message from the API process itself (e.g. a queued run cancelled)."""
         self._deliver(message)
+
+
+def make_executor(settings: Settings, db: Database, hub: LiveHub) -> Executor:
+    """The executor ``settings.executor`` names: the local pool or a Dask cluster."""
+    if settings.executor == "dask":
+        from app.runs.dask_executor import DaskExecutor
+
+        return DaskExecutor(settings, db, hub)
+    return RunExecutor(settings, db, hub)
+
+
+class Executor(Protocol):
+    """What the service needs of an executor."""
+
+    def start(self, loop: asyncio.AbstractEventLoop) -> None: ...
+    def submit(self, run_id: int) -> None: ...
+    def deliver_local(self, message: dict[str, Any]) -> None: ...
+    def sweep(self) -> list[int]: ...
+    def shutdown(self) -> None: ...

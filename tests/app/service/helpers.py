@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 from fastapi.testclient import TestClient
 
 from app.config import Settings
+from app.io.csv_files import read_csv
+from estimation.estimator import get_spec
 from estimation.table import Axis, Table
 
 U1 = [500.0, 1500.0, 2500.0, 3500.0]
@@ -78,6 +81,23 @@ def final_values(client: TestClient, run_id: int) -> dict[str, Any]:
     response = client.get(f"/api/runs/{run_id}/export", params={"format": "json"})
     assert response.status_code == 200, response.text
     return response.json()
+
+
+def reference_run(
+    text: str, tmp_path: Path, estimator: str, accept: Any = None, **config: Any
+) -> dict[str, Any]:
+    """The same run done directly with the estimator, outside the service."""
+    path = tmp_path / "ref.csv"
+    path.write_text(text)
+    signals = read_csv(path).signals
+    body = run_body(0, estimator, **config)["config"]
+    axes = [
+        {"name": a["name"], "breakpoints": a["breakpoints"], "unit": signals.units[a["name"]]}
+        for a in TABLE["axes"]
+    ]
+    full = body | {"axes": axes, "output": "y", "output_unit": "ppm"}
+    final = get_spec(estimator).build(full).fit(signals, accept=accept)
+    return {"values": final.table.values, "signals": signals}
 
 
 def service_settings(database_url: str, **overrides: object) -> Settings:

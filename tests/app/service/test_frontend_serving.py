@@ -60,3 +60,19 @@ def test_root_redirects_and_plotly_is_local(client: TestClient) -> None:
     assert plotly.status_code == 200
     assert plotly.headers["content-type"].startswith("text/javascript")
     assert len(plotly.content) > 1_000_000
+
+
+def test_every_module_is_preloaded_at_its_hashed_url(client: TestClient) -> None:
+    """index.html lists every module for ``modulepreload`` (one fetch wave on a cold cache
+    instead of one per import level); the list must follow the files."""
+    html = client.get("/datasets").text
+    imports = json.loads(re.search(r'type="importmap">(.*?)</script>', html, flags=re.S)[1])[
+        "imports"
+    ]
+    preloaded = set(re.findall(r'<link rel="modulepreload" href="([^"]+)">', html))
+    modules = {
+        "/static/" + p.relative_to(FRONTEND_DIR).as_posix()
+        for p in (FRONTEND_DIR / "js").rglob("*.js")
+    } - {"/static/js/main.js"}
+    assert preloaded == {imports[m] for m in modules}
+    assert re.search(r'<link rel="preload" href="/static/vendor/plotly\.min\.js\?v=[^"]+"', html)

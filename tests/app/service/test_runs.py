@@ -12,33 +12,17 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.api import create_app
-from app.io.csv_files import read_csv
-from estimation.estimator import get_spec
 from tests.app.service.helpers import (
     TABLE,
     final_values,
     log_csv,
+    reference_run,
     run_body,
     service_settings,
     start_run,
     upload_ok,
     wait_run,
 )
-
-
-def _reference(text: str, tmp_path, estimator: str, accept=None, **config) -> dict:  # type: ignore[no-untyped-def]
-    """The same run done directly with the estimator, outside the service."""
-    path = tmp_path / "ref.csv"
-    path.write_text(text)
-    signals = read_csv(path).signals
-    body = run_body(0, estimator, **config)["config"]
-    axes = [
-        {"name": a["name"], "breakpoints": a["breakpoints"], "unit": signals.units[a["name"]]}
-        for a in TABLE["axes"]
-    ]
-    full = body | {"axes": axes, "output": "y", "output_unit": "ppm"}
-    final = get_spec(estimator).build(full).fit(signals, accept=accept)
-    return {"values": final.table.values, "signals": signals}
 
 
 def test_range_gate_counts_rejections_per_run_and_per_cell(client: TestClient, tmp_path) -> None:  # type: ignore[no-untyped-def]
@@ -48,7 +32,7 @@ def test_range_gate_counts_rejections_per_run_and_per_cell(client: TestClient, t
     run = start_run(client, run_body(dataset["id"], gates=gates))
     done = wait_run(client, run["id"])
     assert done["status"] == "succeeded", done["error"]
-    ref = _reference(text, tmp_path, "skf")
+    ref = reference_run(text, tmp_path, "skf")
     temp = ref["signals"]["temp"]
     rejected = int(np.count_nonzero(temp < 70.0))
     assert rejected > 500
@@ -58,7 +42,7 @@ def test_range_gate_counts_rejections_per_run_and_per_cell(client: TestClient, t
     per_cell = np.array(cells["rejected"]["range:temp"])
     assert per_cell.sum() == pytest.approx(rejected)
     assert np.array(cells["visits"]).sum() == pytest.approx(3000 - rejected)
-    expected = _reference(text, tmp_path, "skf", accept=temp >= 70.0)["values"]
+    expected = reference_run(text, tmp_path, "skf", accept=temp >= 70.0)["values"]
     np.testing.assert_array_equal(np.array(final_values(client, run["id"])["values"]), expected)
 
 
@@ -192,7 +176,7 @@ def test_eight_runs_at_once_complete_correctly(eight_workers: TestClient, tmp_pa
         done = wait_run(client, run["id"], timeout=180)
         assert done["status"] == "succeeded", done["error"]
         finished.append(done)
-        expected = _reference(texts[d], tmp_path, estimator)["values"]
+        expected = reference_run(texts[d], tmp_path, estimator)["values"]
         got = np.array(final_values(client, run["id"])["values"])
         np.testing.assert_array_equal(got, expected)
     last_start = max(datetime.fromisoformat(r["started_at"]) for r in finished)
@@ -338,7 +322,7 @@ def test_rate_and_holdoff_gates_through_the_api(client: TestClient, tmp_path) ->
     ]
     done = wait_run(client, start_run(client, run_body(dataset["id"], gates=gates))["id"])
     assert done["status"] == "succeeded", done["error"]
-    ref = _reference(text, tmp_path, "skf")["signals"]
+    ref = reference_run(text, tmp_path, "skf")["signals"]
     t, temp = ref.time, ref["temp"]
     rate = np.abs(np.diff(temp) / np.diff(t))
     rate = np.concatenate([rate[:1], rate])
@@ -352,5 +336,5 @@ def test_rate_and_holdoff_gates_through_the_api(client: TestClient, tmp_path) ->
     cells = client.get(f"/api/runs/{done['id']}/cells").json()
     assert np.sum(cells["rejected"]["rate:temp"]) == pytest.approx(fast.sum())
     assert np.sum(cells["rejected"]["holdoff:temp"]) == pytest.approx((held & ~fast).sum())
-    expected = _reference(text, tmp_path, "skf", accept=~(fast | held))["values"]
+    expected = reference_run(text, tmp_path, "skf", accept=~(fast | held))["values"]
     np.testing.assert_array_equal(np.array(final_values(client, done["id"])["values"]), expected)
