@@ -30,25 +30,14 @@ class DaskCluster:
             start_new_session=True,
             **common,  # type: ignore[arg-type]
         )
+        worker = [DASK, "worker", self.address, "--nthreads", "1", "--nworkers", "1"]
+        worker += ["--memory-limit", "0", "--no-dashboard"]
         self.workers = [
             subprocess.Popen(
-                [
-                    DASK,
-                    "worker",
-                    self.address,
-                    "--nthreads",
-                    "1",
-                    "--nworkers",
-                    "1",
-                    "--memory-limit",
-                    "0",
-                    "--no-dashboard",
-                    "--name",
-                    f"w{i}",
-                ],
+                [*worker, "--name", f"w{i}"],
                 start_new_session=True,
                 **common,  # type: ignore[arg-type]
-            )  # fmt: skip
+            )
             for i in range(workers)
         ]
         self.wait_for_workers(workers)
@@ -65,9 +54,10 @@ class DaskCluster:
                 with self.client() as c:
                     c.wait_for_workers(n, timeout=max(1.0, deadline - time.monotonic()))
                     return
-            except OSError:
+            except OSError as exc:
                 if time.monotonic() > deadline:
-                    raise RuntimeError(f"no Dask cluster at {self.address}: {self.output()}")
+                    message = f"no Dask cluster at {self.address}: {self.output()}"
+                    raise RuntimeError(message) from exc
                 time.sleep(0.5)
 
     def worker_pids(self) -> dict[str, int]:
