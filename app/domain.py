@@ -70,10 +70,26 @@ class Run:
     finished_at: datetime | None
     metrics: dict[str, float | None] = field(default_factory=dict)
     n_versions: int = 0
+    group_id: int | None = None
+    params: dict[str, Any] | None = None
 
     @property
     def finished(self) -> bool:
         return self.status in FINISHED
+
+
+@dataclass(frozen=True, slots=True)
+class RunGroup:
+    """A sweep or a fleet batch (see ``RunGroupRow``)."""
+
+    id: int
+    kind: str
+    name: str
+    estimator: str
+    request: dict[str, Any]
+    metric: str | None
+    order: str | None
+    created_at: datetime
 
 
 @dataclass(frozen=True, slots=True)

@@ -18,7 +18,7 @@ from fastapi.middleware.cors import CORSMiddleware
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from app.api.deps import Services, require_token
-from app.api.routers import base_maps, catalog, datasets, frontend, runs, stream
+from app.api.routers import base_maps, catalog, datasets, frontend, runs, stream, sweeps
 from app.config import Settings, get_settings
 from app.db.engine import Database
 from app.db.migrate import check_schema, upgrade
@@ -29,6 +29,7 @@ from app.runs.hub import LiveHub
 from app.services.base_maps import BaseMapService
 from app.services.datasets import DatasetService
 from app.services.runs import RunService
+from app.services.sweeps import SweepService
 from app.services.tokens import TokenService
 
 MULTIPART_OVERHEAD = 1 << 20  # form fields and boundaries around the file
@@ -59,13 +60,15 @@ def create_app(settings: Settings | None = None, *, execute_runs: bool = True) -
         db = Database(settings.database_url)
         hub = LiveHub()
         executor = make_executor(settings, db, hub) if execute_runs else None
+        run_service = RunService(db, settings, executor)
         app.state.services = Services(
             settings=settings,
             db=db,
             hub=hub,
             executor=executor,
             datasets=DatasetService(db),
-            runs=RunService(db, settings, executor),
+            runs=run_service,
+            sweeps=SweepService(db, run_service),
             base_maps=BaseMapService(db),
             tokens=TokenService(db),
             revision=revision,
@@ -93,7 +96,7 @@ def create_app(settings: Settings | None = None, *, execute_runs: bool = True) -
     install_error_handlers(app)
     api = [Depends(require_token)]
     app.include_router(catalog.open_router, prefix="/api")
-    for module in (catalog, datasets, runs, base_maps):
+    for module in (catalog, datasets, runs, base_maps, sweeps):
         app.include_router(module.router, prefix="/api", dependencies=api)
     app.include_router(stream.router, prefix="/api")
     app.include_router(frontend.router)

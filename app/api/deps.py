@@ -16,6 +16,7 @@ from app.runs.hub import LiveHub
 from app.services.base_maps import BaseMapService
 from app.services.datasets import DatasetService
 from app.services.runs import RunService
+from app.services.sweeps import SweepService
 from app.services.tokens import TokenService
 
 
@@ -27,6 +28,7 @@ class Services:
     executor: Executor | None
     datasets: DatasetService
     runs: RunService
+    sweeps: SweepService
     base_maps: BaseMapService
     tokens: TokenService
     revision: str | None = None

@@ -295,3 +295,48 @@ class PromoteIn(BaseModel):
 
 class CatalogOut(BaseModel):
     items: list[dict[str, Any]]
+
+
+class GroupRunOut(BaseModel):
+    """A run of a sweep or batch, in short."""
+
+    id: int
+    dataset_id: int
+    status: str
+    params: dict[str, Any] | None
+    metric: float | None = Field(None, description="The sweep's ranking metric.")
+    metrics: dict[str, float | None]
+    error: str | None
+
+
+class GroupOut(BaseModel):
+    id: int
+    kind: Literal["sweep", "batch"]
+    name: str
+    estimator: str
+    metric: str | None
+    order: Literal["min", "max"] | None
+    created_at: datetime
+    request: dict[str, Any]
+    counts: dict[str, int] = Field(description="Runs by status.")
+    runs: list[GroupRunOut] = Field(description="Sweeps: best first by the metric.")
+    best_run_id: int | None = None
+
+
+class AggregateOut(BaseModel):
+    """A batch's merged map: inverse-variance per cell (visit-weighted without variances),
+    with each vehicle's standardised deviation z from the other vehicles' merge."""
+
+    axes: list[AxisOut]
+    run_ids: list[int]
+    values: Nested
+    variances: Nested | None
+    weights: list[Nested]
+    z: list[Nested] | None
+    deviating_cells: list[int] | None = Field(description="Cells with |z| > 3, per vehicle.")
+
+
+class BatchOut(GroupOut):
+    aggregate: AggregateOut | None = Field(
+        None, description="Present once every run of the batch has succeeded."
+    )

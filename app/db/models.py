@@ -93,9 +93,29 @@ class RunRow(Base):
     heartbeat_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
     owner: Mapped[str | None] = mapped_column(String(200))  # executor of the attempt
     lost_attempts: Mapped[int] = mapped_column(Integer, default=0, server_default=text("0"))
+    group_id: Mapped[int | None] = mapped_column(
+        ForeignKey("run_groups.id", ondelete="SET NULL"), index=True
+    )
+    params: Mapped[dict[str, Any] | None] = mapped_column(JSON)  # a sweep's sampled values
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
     started_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
     finished_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
+
+
+class RunGroupRow(Base):
+    """A sweep (``kind="sweep"``: one dataset, sampled parameters, ranked by ``metric``) or a
+    fleet batch (``kind="batch"``: many datasets, one config); ``request`` is what was asked."""
+
+    __tablename__ = "run_groups"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    kind: Mapped[str] = mapped_column(String(16))
+    name: Mapped[str] = mapped_column(String(200))
+    estimator: Mapped[str] = mapped_column(String(64))
+    request: Mapped[dict[str, Any]] = mapped_column(JSON)
+    metric: Mapped[str | None] = mapped_column(String(100))
+    order: Mapped[str | None] = mapped_column(String(8))
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
 
 
 class MapVersionRow(Base):

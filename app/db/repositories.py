@@ -18,6 +18,7 @@ from app.db.models import (
     BaseMapRow,
     DatasetRow,
     MapVersionRow,
+    RunGroupRow,
     RunMetricRow,
     RunRow,
     utcnow,
@@ -31,6 +32,7 @@ from app.domain import (
     Page,
     ResumePoint,
     Run,
+    RunGroup,
     Series,
     VersionSummary,
 )
@@ -174,6 +176,8 @@ class RunRepo:
         produces_map: bool,
         n_samples: int,
         base_map_id: int | None,
+        group_id: int | None = None,
+        params: dict[str, Any] | None = None,
     ) -> Run:
         row = RunRow(
             dataset_id=dataset_id,
@@ -190,6 +194,8 @@ class RunRepo:
             rejected={},
             produces_map=produces_map,
             base_map_id=base_map_id,
+            group_id=group_id,
+            params=params,
         )
         self.s.add(row)
         try:
@@ -229,6 +235,8 @@ class RunRepo:
             finished_at=aware(row.finished_at),
             metrics=metrics,
             n_versions=n_versions,
+            group_id=row.group_id,
+            params=row.params,
         )
 
     def _row(self, run_id: int) -> RunRow:
@@ -263,6 +271,15 @@ class RunRepo:
         ids = [r.id for r in rows]
         metrics, counts = self._metrics(ids), self._n_versions(ids)
         return Page([self._run(r, metrics[r.id], counts[r.id]) for r in rows], total, limit, offset)
+
+    def in_group(self, group_id: int) -> list[Run]:
+        """The group's runs in creation order, with their final metrics."""
+        rows = list(
+            self.s.scalars(select(RunRow).where(RunRow.group_id == group_id).order_by(RunRow.id))
+        )
+        ids = [r.id for r in rows]
+        metrics, versions = self._metrics(ids), self._n_versions(ids)
+        return [self._run(r, metrics[r.id], versions[r.id]) for r in rows]
 
     def _metrics(self, run_ids: list[int]) -> dict[int, dict[str, float | None]]:
         out: dict[int, dict[str, float | None]] = {i: {} for i in run_ids}
@@ -432,6 +449,54 @@ class RunRepo:
                 .values(status="interrupted", error=message, stop_request=None)
             )
         return hit
+
+
+class GroupRepo:
+    def __init__(self, session: Session) -> None:
+        self.s = session
+
+    @staticmethod
+    def _group(row: RunGroupRow) -> RunGroup:
+        return RunGroup(
+            id=row.id,
+            kind=row.kind,
+            name=row.name,
+            estimator=row.estimator,
+            request=dict(row.request),
+            metric=row.metric,
+            order=row.order,
+            created_at=aware(row.created_at),  # type: ignore[arg-type]
+        )
+
+    def add(
+        self,
+        *,
+        kind: str,
+        name: str,
+        estimator: str,
+        request: dict[str, Any],
+        metric: str | None = None,
+        order: str | None = None,
+    ) -> RunGroup:
+        row = RunGroupRow(
+            kind=kind, name=name, estimator=estimator, request=request, metric=metric, order=order
+        )
+        self.s.add(row)
+        self.s.flush()
+        return self._group(row)
+
+    def get(self, group_id: int, kind: str) -> RunGroup:
+        row = self.s.get(RunGroupRow, group_id) if _valid(group_id) else None
+        if row is None or row.kind != kind:
+            raise NotFoundError(f"{kind} {group_id} does not exist", field=f"{kind}_id")
+        return self._group(row)
+
+    def list(self, kind: str, *, limit: int, offset: int) -> Page[RunGroup]:
+        where = RunGroupRow.kind == kind
+        total = self.s.scalar(select(func.count()).select_from(RunGroupRow).where(where)) or 0
+        q = select(RunGroupRow).where(where).order_by(RunGroupRow.id.desc())
+        rows = self.s.scalars(q.limit(limit).offset(offset))
+        return Page([self._group(r) for r in rows], total, limit, offset)
 
 
 # --- map versions and results ----------------------------------------------------------------

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
+from sqlalchemy.orm import Session
 
 from app.adapt import map_document
 from app.config import Settings
@@ -54,7 +55,8 @@ class RunService:
         self.settings = settings
         self.executor = executor
 
-    def _submit(self, run_id: int) -> None:
+    def submit(self, run_id: int) -> None:
+        """Hand a stored run to the executor."""
         if self.executor is None:
             raise ConflictError("this server does not execute runs", field=None)
         self.executor.submit(run_id)
@@ -64,30 +66,41 @@ class RunService:
     def create(self, request: RunRequest) -> Run:
         """Plan and store the run in one transaction, then hand it to the executor."""
         run = self._store(request)
-        self._submit(run.id)
+        self.submit(run.id)
         return run
 
     def _store(self, request: RunRequest) -> Run:
         with self.db.write() as s:
-            dataset = DatasetRepo(s).get(request.dataset_id)
-            base_map = None
-            if request.base_map_id is not None:
-                base_map = BaseMapRepo(s).get(request.base_map_id)
-            plan = plan_run(
-                request, dataset, base_map, version_fraction=self.settings.version_fraction
-            )
-            return RunRepo(s).add(
-                dataset_id=dataset.id,
-                name=plan.name,
-                estimator=plan.estimator,
-                signals=plan.signals,
-                table_spec=plan.table_spec,
-                config=plan.config,
-                estimator_config=plan.estimator_config,
-                produces_map=plan.produces_map,
-                n_samples=plan.n_samples,
-                base_map_id=request.base_map_id,
-            )
+            return self.store_in(s, request)
+
+    def store_in(
+        self,
+        s: Session,
+        request: RunRequest,
+        *,
+        group_id: int | None = None,
+        params: dict[str, Any] | None = None,
+    ) -> Run:
+        """Plan ``request`` and store it, queued, in the caller's transaction ``s``."""
+        dataset = DatasetRepo(s).get(request.dataset_id)
+        base_map = None
+        if request.base_map_id is not None:
+            base_map = BaseMapRepo(s).get(request.base_map_id)
+        plan = plan_run(request, dataset, base_map, version_fraction=self.settings.version_fraction)
+        return RunRepo(s).add(
+            dataset_id=dataset.id,
+            name=plan.name,
+            estimator=plan.estimator,
+            signals=plan.signals,
+            table_spec=plan.table_spec,
+            config=plan.config,
+            estimator_config=plan.estimator_config,
+            produces_map=plan.produces_map,
+            n_samples=plan.n_samples,
+            base_map_id=request.base_map_id,
+            group_id=group_id,
+            params=params,
+        )
 
     def get(self, run_id: int) -> Run:
         with self.db.read() as s:
@@ -127,7 +140,7 @@ class RunService:
                     field="run_id",
                 )
             runs.reset_for_resume(run_id)
-        self._submit(run_id)
+        self.submit(run_id)
         if self.executor is not None:
             self.executor.deliver_local(
                 {"kind": "status", "run_id": run_id, "status": "queued", "error": None}
