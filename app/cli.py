@@ -275,8 +275,10 @@ def build_parser() -> argparse.ArgumentParser:
     _bench_parser(sub)
     _reproduce_parser(sub)
     from app.cli_service import add_parsers as _service_parsers
+    from app.cli_sweep import add_parser as _sweep_parser
 
     _service_parsers(sub)
+    _sweep_parser(sub)
     return parser
 
 

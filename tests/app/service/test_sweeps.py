@@ -139,3 +139,37 @@ def test_expand_parameters_grid_and_errors() -> None:
         expand_parameters({"a": Range(min=0, max=1, scale="log")}, samples=2, seed=0)
     with pytest.raises(InvalidRequestError, match="above max"):
         expand_parameters({"a": Range(min=2, max=1)}, samples=2, seed=0)
+
+
+def test_mapwise_sweep_cli_against_a_real_server(
+    backend: str,
+    fresh_url,  # type: ignore[no-untyped-def]
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    from app.cli import main as cli_main
+    from tests.app.service.server import Server
+
+    srv = Server(fresh_url(backend))
+    try:
+        dataset = upload_ok(srv.http, log_csv(1000, seed=62))
+        args = [
+            "sweep", "--url", srv.base, "--dataset", str(dataset["id"]), "--estimator", "skf",
+            "--y", "y", "--axis", "u1=500,1500,2500,3500", "--axis", "u2=0,20,40,60",
+            "--set", "p0=10", "--set", "sigma_v=0.05", "--grid", "sigma_w=0.001,0.01,0.1",
+        ]  # fmt: skip
+        assert cli_main(args) == 0
+        out = capsys.readouterr().out
+        assert out.splitlines()[0].startswith("sweep ")
+        ranked = [line.split() for line in out.splitlines()[3:]]
+        assert [row[0] for row in ranked] == ["1", "2", "3"]
+        metrics = [float(row[-1]) for row in ranked]
+        assert metrics == sorted(metrics)
+        assert cli_main([*args[:-2], "--grid", "sigma_w=0.01,-5"]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("mapwise: error: parameters.sigma_w:")
+        assert len(err.splitlines()) == 1
+        assert cli_main(["sweep", "--url", "http://127.0.0.1:9", "--dataset", "1",
+                         "--estimator", "skf", "--grid", "sigma_w=1"]) == 2  # fmt: skip
+        assert "cannot reach" in capsys.readouterr().err
+    finally:
+        srv.stop()
