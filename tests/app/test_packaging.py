@@ -3,6 +3,7 @@ checkout: ``frontend/`` and ``migrations/`` travel inside the package (app.resou
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 import zipfile
@@ -39,3 +40,33 @@ def test_wheel_bundles_frontend_and_migrations(tmp_path: Path) -> None:
         cwd=tmp_path, env={"PYTHONPATH": str(target)}, capture_output=True, text=True, check=True,
     ).stdout.split()  # fmt: skip
     assert found == [str(target / "app/_bundled/frontend"), str(target / "app/_bundled/migrations")]
+
+
+def test_compose_topology_runs_commands_that_exist() -> None:
+    """docker-compose.yml (no Docker engine here): the app, PostgreSQL, a migration step, a
+    Dask scheduler and workers, every command one this installation has. The same topology
+    runs without Docker in tests/app/service/test_dask.py."""
+    import shutil
+
+    import yaml
+
+    from app.cli import build_parser
+    from app.config import Settings
+
+    compose = yaml.safe_load((ROOT / "docker-compose.yml").read_text())
+    services = compose["services"]
+    assert set(services) == {"db", "migrate", "scheduler", "worker", "app"}
+    for name in ("migrate", "scheduler", "worker", "app"):
+        assert services[name]["build"] == "."
+    assert build_parser().parse_args(services["migrate"]["command"][1:]).db_command == "upgrade"
+    dockerfile = (ROOT / "Dockerfile").read_text()
+    cmd = json.loads(dockerfile.split("CMD ", 1)[1].splitlines()[0])
+    assert build_parser().parse_args(cmd[1:]).host == "0.0.0.0"
+    for name in ("scheduler", "worker"):
+        assert services[name]["command"][0] == "dask"
+        assert shutil.which("dask", path=str(Path(sys.executable).parent))
+    env = services["app"]["environment"]
+    settings = Settings(**{k.removeprefix("MAPWISE_").lower(): v for k, v in env.items()})
+    assert settings.executor == "dask"
+    assert settings.dask_address == "tcp://scheduler:8786"
+    assert services["worker"]["environment"] == env
