@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from app.cli_service import ServiceCliError
+from app.errors import AppError
 from estimation.errors import EstimationError
 
 EXIT_USAGE = 2
@@ -286,7 +287,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         args = build_parser().parse_args(argv)
         return int(args.handler(args))
-    except (UsageError, EstimationError, ServiceCliError) as exc:
+    except (UsageError, EstimationError, ServiceCliError, AppError) as exc:
         message = " ".join(str(exc).split())
         print(f"mapwise: error: {message}", file=sys.stderr)
         return EXIT_USAGE

@@ -69,6 +69,13 @@ class SupersededError(AppError):
     status = 409
 
 
+class DatabaseUnavailableError(AppError):
+    """The database cannot be reached or is restarting: retry shortly (503, Retry-After)."""
+
+    code = "database_unavailable"
+    status = 503
+
+
 class PayloadTooLargeError(AppError):
     code = "payload_too_large"
     status = 413
@@ -90,7 +97,11 @@ class MethodNotAllowedError(AppError):
 
 
 def error_response(error: AppError) -> JSONResponse:
-    headers = {"WWW-Authenticate": "Bearer"} if isinstance(error, UnauthorizedError) else None
+    headers = None
+    if isinstance(error, UnauthorizedError):
+        headers = {"WWW-Authenticate": "Bearer"}
+    elif isinstance(error, DatabaseUnavailableError):
+        headers = {"Retry-After": "2"}
     return JSONResponse(error.body(), status_code=error.status, headers=headers)
 
 

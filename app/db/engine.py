@@ -14,7 +14,10 @@ from typing import Any, Literal
 
 from sqlalchemy import Engine, create_engine, event, text
 from sqlalchemy.engine import make_url
+from sqlalchemy.exc import InterfaceError, OperationalError
 from sqlalchemy.orm import Session, sessionmaker
+
+from app.errors import DatabaseUnavailableError
 
 SQLITE_BUSY_TIMEOUT_MS = 30_000
 _WRITE = "mapwise_write"
@@ -81,18 +84,30 @@ class Database:
 
     @contextmanager
     def write(self) -> Iterator[Session]:
-        with self._write.begin() as session:
+        with _available(), self._write.begin() as session:
             yield session
 
     @contextmanager
     def read(self) -> Iterator[Session]:
-        with self._read() as session:
+        with _available(), self._read() as session:
             yield session
 
     def ping(self) -> None:
         """A round trip to the database (raises when it is unreachable)."""
-        with self._read() as session:
+        with self.read() as session:
             session.execute(text("SELECT 1"))
 
     def dispose(self) -> None:
         self.engine.dispose()
+
+
+@contextmanager
+def _available() -> Iterator[None]:
+    """Connection-level failures (a restarting PostgreSQL, a locked SQLite beyond its busy
+    timeout) become :class:`DatabaseUnavailableError`: a 503 to clients, a retry to workers.
+    ``pool_pre_ping`` then replaces the dead connections on the next checkout."""
+    try:
+        yield
+    except (OperationalError, InterfaceError) as exc:
+        reason = str(getattr(exc, "orig", None) or exc).strip().splitlines()[0][:200]
+        raise DatabaseUnavailableError(f"the database is unavailable: {reason}") from exc

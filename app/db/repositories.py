@@ -663,6 +663,12 @@ class VersionRepo:
         ids = list(self.s.scalars(q.order_by(MapVersionRow.step)))
         return [self.get(run_id, i) for i in ids]
 
+    def has_step(self, run_id: int, step: int) -> bool:
+        q = select(MapVersionRow.id).where(
+            MapVersionRow.run_id == run_id, MapVersionRow.step == step
+        )
+        return self.s.scalar(q.limit(1)) is not None
+
     def delete_after(self, run_id: int, step: int) -> None:
         self.s.execute(
             delete(MapVersionRow).where(MapVersionRow.run_id == run_id, MapVersionRow.step > step)

@@ -19,7 +19,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 from sqlalchemy.orm import Session
@@ -27,7 +27,7 @@ from sqlalchemy.orm import Session
 from app.db.engine import Database
 from app.db.repositories import DatasetRepo, MetricRepo, RunRepo, VersionRepo
 from app.domain import Dataset, ResumePoint, Run, Series
-from app.errors import SupersededError
+from app.errors import DatabaseUnavailableError, SupersededError
 from app.runs.states import dump_state, load_state
 from app.services.datasets import Truth, unpack_signals, unpack_truth
 from app.services.decimate import finite_or_none, nested_or_none, stride_decimate
@@ -39,8 +39,10 @@ from estimation.signals import Signals
 from estimation.table import Table
 
 Publish = Callable[[dict[str, Any]], None]
+T = TypeVar("T")
 LIVE_POINTS_PER_TICK = 100
 PROGRESS_EVERY_S = 1.0
+DB_RETRY_S = 60.0  # how long a run waits for its database to come back before failing
 STATUS_ACCEPTED = 0
 # Snapshot status codes that count against a cell, by name (see estimation.estimator.Snapshot;
 # code 1, the accept mask, is counted by the gate that set it).
@@ -238,11 +240,39 @@ class RunSession:
             yield s
 
     def _finish(self, status: str, error: str | None) -> None:
-        with self._write() as s:
-            RunRepo(s).set_status(
-                self.run_id, status, only_if=("running",), error=error, finished=True
-            )
+        def write() -> None:
+            with self._write() as s:
+                RunRepo(s).set_status(
+                    self.run_id, status, only_if=("running",), error=error, finished=True
+                )
+
+        self._durably(write)
         self._status(status, error)
+
+    def _durably(
+        self, write: Callable[[], T], stored: Callable[[], bool] | None = None
+    ) -> T | None:
+        """``write()``, retried while the database is unavailable (a PostgreSQL restart) for
+        up to DB_RETRY_S. A commit whose acknowledgement was lost with the connection may
+        have landed: ``stored()`` tells, so nothing is written twice (then ``None``)."""
+        deadline = time.monotonic() + DB_RETRY_S
+        delay = 0.2
+        while True:
+            try:
+                return write()
+            except DatabaseUnavailableError:
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(delay)
+                delay = min(2.0, 2 * delay)
+                if stored is not None:
+                    with contextlib.suppress(DatabaseUnavailableError):
+                        if stored():
+                            return None
+
+    def _has_version(self, step: int) -> bool:
+        with self.db.read() as s:
+            return VersionRepo(s).has_step(self.run_id, step)
 
     def _status(self, status: str, error: str | None) -> None:
         progress = self.p.version_sample / self.n if getattr(self, "n", 0) else 0.0
@@ -259,6 +289,12 @@ class RunSession:
     # -- preparation ----------------------------------------------------------------------------
 
     def _prepare(self) -> None:
+        loaded = self._durably(self._load)
+        assert loaded is not None
+        self._set_up(*loaded)
+
+    def _load(self) -> tuple[bytes, bytes | None]:
+        """The run, its dataset's payload and truth, and where to resume from."""
         with self.db.read() as s:
             self.run: Run = RunRepo(s).get(self.run_id)
             datasets = DatasetRepo(s)
@@ -266,6 +302,9 @@ class RunSession:
             payload = datasets.payload(self.run.dataset_id)
             truth_blob = datasets.truth(self.run.dataset_id)
             self.resume: ResumePoint | None = VersionRepo(s).resume_point(self.run_id)
+        return payload, truth_blob
+
+    def _set_up(self, payload: bytes, truth_blob: bytes | None) -> None:
         self.signals: Signals = unpack_signals(payload, self.dataset.channels)
         self.truth: Truth | None = None if truth_blob is None else unpack_truth(truth_blob)
         self.n = len(self.signals)
@@ -282,8 +321,12 @@ class RunSession:
         self.state: Any = None
         if self.resume is not None:
             self._restore(self.resume)
-        with self._write() as s:
-            VersionRepo(s).delete_after(self.run_id, self.p.version_sample)
+
+        def forget_later_versions() -> None:
+            with self._write() as s:
+                VersionRepo(s).delete_after(self.run_id, self.p.version_sample)
+
+        self._durably(forget_later_versions)
 
     def _prepare_gates(self) -> None:
         self.accept: np.ndarray | None = None
@@ -430,19 +473,22 @@ class RunSession:
     def _check_stop(self, snap: Snapshot) -> None:
         now = time.monotonic()
         if now - self.p.last_db_write >= PROGRESS_EVERY_S:
-            with self._write() as s:
+            with contextlib.suppress(DatabaseUnavailableError), self._write() as s:
                 RunRepo(s).progress(
                     self.run_id,
                     sample=snap.sample,
                     progress=snap.sample / self.n,
                     rejected=self._run_rejected(),
                 )
-            self.p.last_db_write = now
+            self.p.last_db_write = now  # also after a failure: the next try is a second on
         if now - self.p.last_stop_check < self.ctx.cancel_poll_s:
             return
         self.p.last_stop_check = now
-        with self.db.read() as s:
-            request = RunRepo(s).stop_request(self.run_id)
+        try:
+            with self.db.read() as s:
+                request = RunRepo(s).stop_request(self.run_id)
+        except DatabaseUnavailableError:
+            return  # asked again at the next check
         if request is None:
             return
         if snap.sample > self.p.version_sample:
@@ -472,14 +518,19 @@ class RunSession:
         a, z = self.p.version_sample, snap.sample
         segment = {name: values[a:z] for name, values in self.outputs.items()}
         segment["__status__"] = self.status[a:z]
-        with self._write() as s:
-            VersionRepo(s).add(**self._version_fields(snap, final=final, segment=segment))
-            RunRepo(s).progress(
-                self.run_id,
-                sample=snap.sample,
-                progress=snap.sample / self.n,
-                rejected=self._run_rejected(),
-            )
+        fields = self._version_fields(snap, final=final, segment=segment)
+
+        def write() -> None:
+            with self._write() as s:
+                VersionRepo(s).add(**fields)
+                RunRepo(s).progress(
+                    self.run_id,
+                    sample=snap.sample,
+                    progress=snap.sample / self.n,
+                    rejected=self._run_rejected(),
+                )
+
+        self._durably(write, stored=lambda: self._has_version(snap.sample))
         self.p.version_sample = z
         self.p.last_db_write = time.monotonic()
 
@@ -510,14 +561,19 @@ class RunSession:
         a, z = self.p.version_sample, snap.sample
         segment = {name: values[a:z] for name, values in self.outputs.items()}
         segment["__status__"] = self.status[a:z]
-        with self._write() as s:
-            VersionRepo(s).add(**self._version_fields(snap, final=True, segment=segment))
-            MetricRepo(s).replace(self.run_id, metrics, series)
-            runs = RunRepo(s)
-            runs.progress(
-                self.run_id, sample=snap.sample, progress=1.0, rejected=self._run_rejected()
-            )
-            runs.set_status(self.run_id, "succeeded", only_if=("running",), finished=True)
+        fields = self._version_fields(snap, final=True, segment=segment)
+
+        def write() -> None:
+            with self._write() as s:
+                VersionRepo(s).add(**fields)
+                MetricRepo(s).replace(self.run_id, metrics, series)
+                runs = RunRepo(s)
+                runs.progress(
+                    self.run_id, sample=snap.sample, progress=1.0, rejected=self._run_rejected()
+                )
+                runs.set_status(self.run_id, "succeeded", only_if=("running",), finished=True)
+
+        self._durably(write, stored=lambda: self._has_version(snap.sample))
         self.p.version_sample = z
         self._tick(snap, force=True, metrics=metrics)
         self._status("succeeded", None)
