@@ -1,0 +1,206 @@
+"""A bounded load test of a mapwise server on loopback (figures for the README; a short run of
+it is a test, tests/app/service/test_load.py).
+
+``--users`` concurrent users for ``--seconds``, each in a loop: upload a small CSV log, start
+a paced SKF run on it, watch its live stream for a few seconds, and read the lists and the
+run. Then every run started is waited for. Reported: requests and requests/s, p50/p99
+latency, live frames/s delivered, errors (any non-2xx or transport error), and lost runs
+(started but not ``succeeded``).
+
+    .venv/bin/python scripts/load.py [--url URL | --database-url URL] [--users 10]
+        [--seconds 60] [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import random
+import statistics
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import httpx
+import numpy as np
+import websockets
+
+ROOT = Path(__file__).resolve().parents[1]
+U1 = [500.0, 1500.0, 2500.0, 3500.0]
+U2 = [0.0, 20.0, 40.0, 60.0]
+TERMINAL = ("succeeded", "failed", "cancelled", "interrupted")
+
+
+def small_log(seed: int, rows: int = 1000, rate_hz: float = 100.0) -> bytes:
+    rng = np.random.default_rng(seed)
+    t = np.arange(rows) / rate_hz
+    u1, u2 = rng.uniform(400, 3600, rows), rng.uniform(-5, 65, rows)
+    y = 1.0 + u1 / 1000.0 + u2 / 40.0 + rng.normal(0, 0.05, rows)
+    lines = ["time [s],u1 [rpm],u2 [mg/stroke],y [ppm]"]
+    lines += [f"{a:.4f},{b:.3f},{c:.3f},{d:.5f}" for a, b, c, d in zip(t, u1, u2, y, strict=True)]
+    return ("\n".join(lines) + "\n").encode()
+
+
+def run_body(dataset_id: int, pace: float) -> dict[str, Any]:
+    return {
+        "dataset_id": dataset_id,
+        "estimator": "skf",
+        "signals": {"y": "y"},
+        "table": {"axes": [{"name": "u1", "breakpoints": U1}, {"name": "u2", "breakpoints": U2}]},
+        "config": {"sigma_w": 0.01, "sigma_v": 0.05, "p0": 10.0, "pace": pace},
+    }
+
+
+@dataclass
+class Tally:
+    latencies: list[float] = field(default_factory=list)
+    errors: list[str] = field(default_factory=list)
+    frames: int = 0
+    frame_delays: list[float] = field(default_factory=list)
+    runs: list[int] = field(default_factory=list)
+
+    async def call(self, client: httpx.AsyncClient, method: str, path: str, **kw: Any) -> Any:
+        t0 = time.perf_counter()
+        try:
+            response = await client.request(method, path, **kw)
+        except httpx.HTTPError as exc:
+            self.errors.append(f"{method} {path}: {exc!r}")
+            return None
+        self.latencies.append(time.perf_counter() - t0)
+        if response.status_code >= 400:
+            self.errors.append(f"{method} {path}: {response.status_code} {response.text[:200]}")
+            return None
+        return response.json() if response.content else {}
+
+
+async def watch(ws_url: str, seconds: float, tally: Tally, headers: dict[str, str]) -> None:
+    end = time.monotonic() + seconds
+    try:
+        async with websockets.connect(ws_url, max_size=None, additional_headers=headers) as ws:
+            while (left := end - time.monotonic()) > 0:
+                try:
+                    message = json.loads(await asyncio.wait_for(ws.recv(), timeout=left))
+                except TimeoutError:
+                    return
+                if message["type"] in ("full", "delta"):
+                    tally.frames += 1
+                if message.get("emitted_at"):
+                    tally.frame_delays.append(time.time() - float(message["emitted_at"]))
+                if message["type"] == "status" and message["status"] in TERMINAL:
+                    return
+    except (OSError, websockets.WebSocketException) as exc:
+        tally.errors.append(f"WS {ws_url}: {exc!r}")
+
+
+async def user(base: str, index: int, until: float, tally: Tally, token: str | None) -> None:
+    headers = {"Authorization": f"Bearer {token}"} if token else {}
+    ws_base = base.replace("http", "ws", 1)
+    rng = random.Random(index)
+    async with httpx.AsyncClient(base_url=base, headers=headers, timeout=60) as client:
+        k = 0
+        while time.monotonic() < until:
+            k += 1
+            files = {"file": (f"u{index}-{k}.csv", small_log(index * 1000 + k))}
+            dataset = await tally.call(client, "POST", "/api/datasets", files=files)
+            if dataset is None:
+                continue
+            run = await tally.call(
+                client, "POST", "/api/runs", json=run_body(dataset["id"], rng.choice([5, 10, 20]))
+            )
+            if run is None:
+                continue
+            tally.runs.append(int(run["id"]))
+            ws_url = f"{ws_base}/api/runs/{run['id']}/stream" + (f"?token={token}" if token else "")
+            watcher = asyncio.create_task(watch(ws_url, rng.uniform(1.0, 3.0), tally, {}))
+            for path in ("/api/runs?limit=20", "/api/datasets?limit=20", f"/api/runs/{run['id']}"):
+                await tally.call(client, "GET", path)
+            await watcher
+
+
+async def _settle(base: str, tally: Tally, token: str | None, timeout: float) -> list[int]:
+    """Runs not ``succeeded`` once every started run had time to finish."""
+    headers = {"Authorization": f"Bearer {token}"} if token else {}
+    deadline = time.monotonic() + timeout
+    pending = set(tally.runs)
+    statuses: dict[int, str] = {}
+    async with httpx.AsyncClient(base_url=base, headers=headers, timeout=60) as client:
+        while pending and time.monotonic() < deadline:
+            for run_id in list(pending):
+                doc = (await client.get(f"/api/runs/{run_id}")).json()
+                if doc["status"] in TERMINAL:
+                    statuses[run_id] = doc["status"]
+                    pending.discard(run_id)
+            await asyncio.sleep(0.5)
+    return sorted(pending | {r for r, s in statuses.items() if s != "succeeded"})
+
+
+def run_load(
+    base: str, *, users: int, seconds: float, token: str | None = None, settle_s: float = 300.0
+) -> dict[str, Any]:
+    tally = Tally()
+
+    async def main() -> list[int]:
+        until = time.monotonic() + seconds
+        await asyncio.gather(*(user(base, i, until, tally, token) for i in range(users)))
+        return await _settle(base, tally, token, settle_s)
+
+    t0 = time.perf_counter()
+    lost = asyncio.run(main())
+    elapsed = time.perf_counter() - t0
+    lat = sorted(1000 * x for x in tally.latencies) or [float("nan")]
+    delays = sorted(tally.frame_delays) or [float("nan")]
+    return {
+        "users": users,
+        "seconds": seconds,
+        "requests": len(tally.latencies),
+        "requests_per_s": round(len(tally.latencies) / seconds, 1),
+        "p50_ms": round(statistics.median(lat), 1),
+        "p95_ms": round(lat[int(0.95 * (len(lat) - 1))], 1),
+        "p99_ms": round(lat[int(0.99 * (len(lat) - 1))], 1),
+        "frames": tally.frames,
+        "frames_per_s": round(tally.frames / seconds, 1),
+        "frame_delay_p99_s": round(delays[int(0.99 * (len(delays) - 1))], 3),
+        "runs_started": len(tally.runs),
+        "lost_runs": lost,
+        "errors": tally.errors[:20],
+        "error_count": len(tally.errors),
+        "wall_s": round(elapsed, 1),
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--url", help="a running server (default: start one)")
+    parser.add_argument("--database-url", help="for the server started here (default SQLite)")
+    parser.add_argument("--token", help="bearer token of --url")
+    parser.add_argument("--users", type=int, default=10)
+    parser.add_argument("--seconds", type=float, default=60.0)
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args()
+    server = None
+    if args.url is None:
+        sys.path.insert(0, str(ROOT))
+        from tests.app.service.server import Server
+
+        work = Path(tempfile.mkdtemp(prefix="mapwise-load-"))
+        server = Server(args.database_url or f"sqlite:///{work / 'load.db'}")
+        args.url = server.base
+    try:
+        result = run_load(args.url, users=args.users, seconds=args.seconds, token=args.token)
+    finally:
+        if server is not None:
+            server.stop()
+    if args.json:
+        print(json.dumps(result))
+    else:
+        for key, value in result.items():
+            print(f"{key:<20} {value}")
+    sys.exit(0 if not result["error_count"] and not result["lost_runs"] else 1)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,21 @@
+"""A short run of the load test (scripts/load.py) against a real server on SQLite and on
+PostgreSQL: 6 users uploading, starting paced runs and watching their streams for 15 s —
+no error, no lost run, live frames delivered, p99 latency bounded."""
+
+from __future__ import annotations
+
+from scripts.load import run_load
+from tests.app.service.server import Server
+
+
+def test_concurrent_users_get_no_errors_and_lose_no_run(backend: str, fresh_url) -> None:  # type: ignore[no-untyped-def]
+    server = Server(fresh_url(backend))
+    try:
+        result = run_load(server.base, users=6, seconds=15.0, settle_s=180.0)
+    finally:
+        server.stop()
+    assert result["error_count"] == 0, result["errors"]
+    assert result["lost_runs"] == []
+    assert result["runs_started"] >= 6
+    assert result["frames"] >= result["runs_started"]  # every viewer got at least its full frame
+    assert result["p99_ms"] < 2000, result
