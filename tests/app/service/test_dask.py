@@ -5,7 +5,7 @@ PostgreSQL with the API processes (``MAPWISE_EXECUTOR=dask``):
 * its live frames reach a viewer connected to *another* API process;
 * a worker killed mid-run: the run finishes on the other worker, resumed from its last
   version, once, on the uninterrupted map, with the lost attempt counted;
-* the API process killed mid-batch: every run still reaches a terminal state, correctly.
+* the API process killed mid-sweep: every run still reaches a terminal state, correctly.
 """
 
 from __future__ import annotations
@@ -121,24 +121,38 @@ def test_a_killed_worker_mid_run_is_resumed_elsewhere_once(
         server.stop()
 
 
-def test_the_api_process_killed_mid_batch_loses_no_run(
+def test_the_api_process_killed_mid_sweep_loses_no_run(
     cluster: DaskCluster, database: str, tmp_path: Any
 ) -> None:
     first = _dask_server(database, cluster)
     text = log_csv(2000, seed=53, rate_hz=100.0)
+    sigma_w = [0.003, 0.01, 0.03]
     try:
         dataset = upload_ok(first.http, text)
-        ids = [int(start_run(first.http, run_body(dataset["id"], pace=10))["id"]) for _ in range(6)]
-        first.wait_run(ids[0], ("running",))
+        body = run_body(dataset["id"]) | {
+            "parameters": {"sigma_w": sigma_w, "pace": [10, 20]},
+            "metric": "output_rmse",
+        }
+        response = first.http.post("/api/sweeps", json=body)
+        assert response.status_code == 201, response.text
+        sweep = response.json()
+        first.wait_run(sweep["runs"][0]["id"], ("running", "succeeded"))
     finally:
-        first.kill()  # kill -9: the submitted runs live on in the cluster
+        first.kill()  # kill -9 mid-sweep: the submitted runs live on in the cluster
     second = _dask_server(database, cluster)
     try:
-        expected = reference_run(text, tmp_path, "skf")["values"]
-        for run_id in ids:
-            done = second.wait_run(run_id, TERMINAL, timeout=180)
-            assert done["status"] == "succeeded", done
-            np.testing.assert_array_equal(_final(second, run_id), expected)
+        deadline = time.monotonic() + 180
+        while True:
+            doc = second.get(f"/api/sweeps/{sweep['id']}")
+            if all(r["status"] in TERMINAL for r in doc["runs"]):
+                break
+            assert time.monotonic() < deadline, (doc["counts"], cluster.output())
+            time.sleep(0.2)
+        assert doc["counts"] == {"succeeded": 6}
+        for run in doc["runs"]:
+            config = {k: v for k, v in run["params"].items() if k != "pace"}
+            expected = reference_run(text, tmp_path, "skf", **config)["values"]
+            np.testing.assert_array_equal(_final(second, run["id"]), expected)
     finally:
         second.stop()
 
