@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from typing import Annotated, Literal
 
 from fastapi import APIRouter, Query, Response
@@ -158,7 +159,7 @@ def export_run(
     return Response(
         download.content,
         media_type=download.media_type,
-        headers={"Content-Disposition": f'attachment; filename="{download.filename}"'},
+        headers={"Content-Disposition": content_disposition(download.filename)},
     )
 
 
@@ -179,3 +180,10 @@ def compare_runs(services: ServicesDep, runs: Annotated[str, Query(max_length=20
         final = None if version is None else VersionOut.of_version(version)
         items.append(CompareItem(**doc, final_version=final))
     return CompareOut(runs=items)
+
+
+def content_disposition(filename: str) -> str:
+    """``attachment`` with a filename that cannot break out of the header or the path:
+    ASCII letters, digits, ``._-`` only (RFC 6266), at most 120 characters."""
+    safe = re.sub(r"[^A-Za-z0-9._-]+", "_", filename).strip("._") or "download"
+    return f'attachment; filename="{safe[:120]}"'

@@ -8,12 +8,14 @@ from __future__ import annotations
 import asyncio
 import contextlib
 from typing import Any
+from urllib.parse import urlsplit
 
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 from starlette.concurrency import run_in_threadpool
 
 from app.api.deps import Services, check_token, get_services
 from app.api.schemas import RunOut
+from app.config import Settings
 from app.domain import FINISHED, MapVersion, Run, Series
 from app.errors import AppError
 from app.runs.hub import LiveState
@@ -114,6 +116,12 @@ def _status_message(frame: dict[str, Any]) -> dict[str, Any]:
 @router.websocket("/runs/{run_id}/stream")
 async def stream_run(websocket: WebSocket, run_id: int) -> None:
     services = get_services(websocket)
+    origin = websocket.headers.get("origin")
+    if origin is not None and not _allowed_origin(origin, websocket, services.settings):
+        # Browsers send their page's Origin on every WebSocket and CORS does not apply to
+        # them: without this check any site a user visits could watch their runs.
+        await websocket.close(code=CLOSE_POLICY, reason="origin not allowed")
+        return
     try:
         await run_in_threadpool(check_token, services, websocket.query_params.get("token"))
     except AppError as exc:
@@ -143,6 +151,15 @@ async def stream_run(websocket: WebSocket, run_id: int) -> None:
         pass
     finally:
         services.hub.unsubscribe(viewer)
+
+
+def _allowed_origin(origin: str, websocket: WebSocket, settings: Settings) -> bool:
+    """The dashboard's own origin (same host and port as the request), or a configured one."""
+    host = websocket.headers.get("host", "")
+    parsed = urlsplit(origin)
+    if parsed.scheme in ("http", "https") and parsed.netloc and parsed.netloc == host:
+        return True
+    return origin in settings.cors_origins
 
 
 async def _drain_client(websocket: WebSocket) -> None:
