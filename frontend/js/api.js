@@ -2,7 +2,7 @@
  * REST client for the mapwise API. Every failure becomes an ApiError carrying the API's
  * {"error": {code, message, field}}; showError() puts the message next to the field concerned.
  */
-import { STORAGE, SEL } from "./constants.js";
+import { SEL, SELECT, STORAGE } from "./constants.js";
 import { h } from "./dom.js";
 
 export class ApiError extends Error {
@@ -180,7 +180,7 @@ export function scenarios() {
 /** Remove every error message shown inside `container`. */
 export function clearErrors(container) {
   for (const el of container.querySelectorAll(SEL.fieldError)) el.remove();
-  for (const el of container.querySelectorAll("[aria-invalid]")) {
+  for (const el of container.querySelectorAll(SEL.invalid)) {
     el.removeAttribute("aria-invalid");
     const ids = (el.getAttribute("aria-describedby") || "").split(" ").filter((id) => !id.startsWith("err-"));
     if (ids.length) el.setAttribute("aria-describedby", ids.join(" "));
@@ -198,8 +198,7 @@ function controlFor(container, field) {
   const parts = String(field).split(/[.[\]]+/).filter(Boolean);
   for (let n = parts.length; n > 0; n -= 1) {
     const key = parts.slice(0, n).join(".");
-    const el = container.querySelector(`[data-field="${CSS.escape(key)}"]`) ||
-      container.querySelector(`[name="${CSS.escape(key)}"]`);
+    const el = container.querySelector(SELECT.dataField(key)) || container.querySelector(SELECT.name(key));
     if (el) return el;
   }
   return null;
@@ -217,7 +216,7 @@ export function showError(container, err, { prefix = "" } = {}) {
   if (control) {
     const id = `err-${Math.random().toString(36).slice(2, 9)}`;
     const note = h("div", { class: "field-error", id, role: "alert" }, message);
-    const host = control.closest(".field") || control.parentElement;
+    const host = control.closest(SEL.field) || control.parentElement;
     host.append(note);
     control.setAttribute("aria-invalid", "true");
     const described = control.getAttribute("aria-describedby");

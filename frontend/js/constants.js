@@ -3,13 +3,33 @@
 export const SEL = Object.freeze({
   main: "#main",
   navLink: "a[data-nav]",
+  link: "a[href]",
   currentRun: "[data-current-run]",
   toasts: "[data-toasts]",
   themeToggle: "[data-theme-toggle]",
   themeLabel: "[data-theme-label]",
   health: "[data-health]",
+  pageTitle: "[data-page-title]",
+  tokenDialog: "dialog[data-token]",
   fieldError: ".field-error",
   formError: "[data-form-error]",
+  invalid: "[aria-invalid]",
+  field: ".field",
+  cardTitle: ".card-head h2",
+  tab: "[role=tab]",
+  tabPanel: "[role=tabpanel]",
+  menuItem: "[role=menuitem]",
+  legend: "legend",
+  plotlyPreload: "link[data-plotly]",
+});
+
+/** Selectors built from a value (CSS-escaped). */
+export const SELECT = Object.freeze({
+  dataField: (key) => `[data-field="${CSS.escape(key)}"]`,
+  name: (key) => `[name="${CSS.escape(key)}"]`,
+  dataColumn: (key) => `[data-column="${CSS.escape(key)}"]`,
+  sortButton: (key) => `[data-sort="${CSS.escape(key)}"]`,
+  id: (id) => `#${CSS.escape(id)}`,
 });
 
 export const EVT = Object.freeze({
@@ -23,6 +43,13 @@ export const STORAGE = Object.freeze({
   theme: "mapwise.theme",
   token: "mapwise.token",
   mapMode: "mapwise.map-mode",
+  /** sessionStorage: the New-run form being filled in (restored on reload) */
+  newRunDraft: "mapwise.new-run-draft",
+});
+
+/** Performance marks (performance.mark) the router sets; tests and profiling read them. */
+export const MARK = Object.freeze({
+  viewMounted: "mapwise:view-mounted",
 });
 
 /** Live rendering: at most 20 frames per second (issue 7). */

@@ -1,4 +1,5 @@
 /** Small DOM and formatting helpers; never builds HTML from strings, so data stays text. */
+import { SEL } from "./constants.js";
 
 /**
  * Create an element: h("button", {class: "primary", onclick}, "Start").
@@ -152,7 +153,7 @@ export function statusBadge(status) {
 
 /** Toast message in the shared live region. */
 export function toast(message, { error = false, ms = 4000 } = {}) {
-  const host = document.querySelector("[data-toasts]");
+  const host = document.querySelector(SEL.toasts);
   if (!host) return;
   const el = h("div", { class: `toast${error ? " error" : ""}` }, message);
   host.append(el);

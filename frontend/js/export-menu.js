@@ -1,6 +1,6 @@
 /** The "Export" menu button of a run: one item per format, keyboard operable (menu pattern). */
 import { api, showError } from "./api.js";
-import { EXPORT_FORMATS } from "./constants.js";
+import { EXPORT_FORMATS, SEL } from "./constants.js";
 import { h, icon, ICONS } from "./dom.js";
 
 /**
@@ -27,7 +27,7 @@ export function exportMenu(runId, { versionId, errorHost, signal }) {
   function open() {
     list.hidden = false;
     button.setAttribute("aria-expanded", "true");
-    list.querySelector("button")?.focus();
+    list.querySelector(SEL.menuItem)?.focus();
   }
 
   function close() {
@@ -37,7 +37,7 @@ export function exportMenu(runId, { versionId, errorHost, signal }) {
 
   button.addEventListener("click", () => (list.hidden ? open() : close()));
   list.addEventListener("keydown", (e) => {
-    const items = [...list.querySelectorAll("button")];
+    const items = [...list.querySelectorAll(SEL.menuItem)];
     const i = items.indexOf(document.activeElement);
     if (e.key === "Escape" || e.key === "Tab") {
       close();

@@ -1,35 +1,47 @@
 /**
- * Table grid editor for the run form: breakpoints per axis (typed, or fitted to the data),
- * a coverage plot of the operating points over the grid, and the starting map — constant θ0,
- * values typed per cell (with locked cells), or an imported base map.
+ * Table grid editor for the run form: breakpoints per axis (one to three axes, typed or fitted
+ * to the data), a coverage plot of the operating points over the grid, and the starting map —
+ * constant θ0, values typed per cell (with locked cells; a 3-D table one slice at a time), or
+ * an imported base map, which is sent only when one is chosen and the grid still matches it.
  */
 import { api, showError } from "./api.js";
+import { SELECT } from "./constants.js";
 import { fmt, h, icon, ICONS, niceBreakpoints, parseNumberList, quantile, withUnit } from "./dom.js";
-import { axis, baseLayout, purge, react, STATIC_CONFIG, theme } from "./plot.js";
+import { axis, baseLayout, purge, react, SCALE_VIRIDIS, STATIC_CONFIG, theme } from "./plot.js";
 
-const MAX_AXES = 2;
+/** The estimators' tables go up to three dimensions (the API itself takes any number of axes). */
+export const MAX_AXES = 3;
+const DEFAULT_BREAKPOINTS = 8;
+const MAX_BREAKPOINTS = 64;
+/** The field an error about the starting map is shown next to (the base-map picker). */
+const BASE_FIELD = "base_map_id";
 
 /**
- * @param {{channels: {name, unit}[], preview: object|null, axes?: string[], baseMaps?: object[]}} opts
+ * @param {{channels: {name, unit}[], preview: object|null, axes?: string[], baseMaps?: object[],
+ *   saved?: object|null, onChange?: () => void}} opts
+ *   saved: a snapshot() to start from (the draft of a reloaded form); onChange: any edit
  */
-export function gridEditor({ channels, preview, axes: initial = [], baseMaps = [] }) {
+export function gridEditor({ channels, preview, axes: initial = [], baseMaps = [], saved = null, onChange = () => {} }) {
   const state = {
     axes: [],
     start: "constant",
     values: null,
     locked: new Set(),
     lockMode: false,
-    baseMapId: null,
+    baseMap: null,
     baseMaps: [...baseMaps],
+    slice: 0,
   };
   const axesHost = h("div", { "data-axes": "" });
   const coverage = h("div", { class: "plot short", role: "img", "aria-label": "Operating points over the grid" });
   const startHost = h("div", { "data-start-map": "" });
+  const addButton = h("button", { type: "button", class: "small", "data-add-axis": "", onclick: () => { addAxis(); changed(); } },
+    icon(ICONS.plus), "Add axis");
   const el = h("div", { class: "grid-editor" },
     axesHost,
     h("div", { class: "row", style: { margin: "8px 0 14px" } },
-      h("button", { type: "button", class: "small", "data-add-axis": "", onclick: () => addAxis() }, icon(ICONS.plus), "Add axis"),
-      h("span", { class: "help" }, "Breakpoints are in the column's unit, strictly increasing.")),
+      addButton,
+      h("span", { class: "help" }, `Up to ${MAX_AXES} axes. Breakpoints are in the column's unit, strictly increasing.`)),
     h("div", { class: "label" }, "Coverage of the log over the grid"),
     coverage,
     h("div", { class: "label", style: { marginTop: "14px" } }, "Starting map"),
@@ -37,6 +49,7 @@ export function gridEditor({ channels, preview, axes: initial = [], baseMaps = [
 
   const channelInfo = (name) => channels.find((c) => c.name === name) ?? { name, unit: "" };
   const column = (name) => preview?.channels?.[name]?.values ?? [];
+  const changed = () => onChange();
 
   function fitted(name, n) {
     const vals = column(name).filter((v) => v !== null);
@@ -48,7 +61,7 @@ export function gridEditor({ channels, preview, axes: initial = [], baseMaps = [
     if (state.axes.length >= MAX_AXES) return;
     const used = new Set(state.axes.map((a) => a.name));
     const pick = name ?? channels.find((c) => !used.has(c.name))?.name ?? channels[0]?.name;
-    const n = state.axes.length === 0 ? 8 : 8;
+    const n = DEFAULT_BREAKPOINTS;
     state.axes.push({ name: pick, unit: channelInfo(pick).unit ?? "", text: fitted(pick, n).join(", "), n });
     renderAxes();
   }
@@ -61,13 +74,14 @@ export function gridEditor({ channels, preview, axes: initial = [], baseMaps = [
       const unit = h("input", { type: "text", id: `axis-${k}-unit`, "data-field": `${pre}.unit`, value: ax.unit });
       const bps = h("input", { type: "text", id: `axis-${k}-bp`, class: "mono", "data-field": `${pre}.breakpoints`,
         name: `${pre}.breakpoints`, value: ax.text, autocomplete: "off" });
-      const count = h("input", { type: "number", id: `axis-${k}-n`, min: "2", max: "64", step: "1", value: String(ax.n),
-        style: { width: "70px" }, "aria-label": `Number of breakpoints of axis ${k + 1}` });
+      const count = h("input", { type: "number", id: `axis-${k}-n`, min: "2", max: String(MAX_BREAKPOINTS), step: "1",
+        value: String(ax.n), style: { width: "70px" }, "aria-label": `Number of breakpoints of axis ${k + 1}` });
       sel.addEventListener("change", () => {
         ax.name = sel.value;
         ax.unit = channelInfo(sel.value).unit ?? "";
         ax.text = fitted(sel.value, ax.n).join(", ");
         renderAxes();
+        changed();
       });
       unit.addEventListener("input", () => { ax.unit = unit.value; });
       bps.addEventListener("change", () => {
@@ -75,12 +89,14 @@ export function gridEditor({ channels, preview, axes: initial = [], baseMaps = [
         ax.n = safeList(bps.value).length || ax.n;
         count.value = String(ax.n);
         refreshGrid();
+        changed();
       });
       const fit = () => {
-        ax.n = Math.max(2, Math.min(64, Number(count.value) || 8));
+        ax.n = Math.max(2, Math.min(MAX_BREAKPOINTS, Number(count.value) || DEFAULT_BREAKPOINTS));
         ax.text = fitted(ax.name, ax.n).join(", ");
         bps.value = ax.text;
         refreshGrid();
+        changed();
       };
       count.addEventListener("change", fit);
       return h("div", { class: "axis-row", "data-axis": k },
@@ -92,9 +108,9 @@ export function gridEditor({ channels, preview, axes: initial = [], baseMaps = [
             h("button", { type: "button", class: "small", onclick: fit, "data-fit": k }, "Fit to data"))),
         h("div", { class: "field" }, h("div", { class: "label" }, "\u00a0"),
           h("button", { type: "button", class: "small ghost icon", "aria-label": `Remove axis ${k + 1}`,
-            disabled: state.axes.length <= 1, onclick: () => { state.axes.splice(k, 1); renderAxes(); } }, icon(ICONS.x))));
+            disabled: state.axes.length <= 1, onclick: () => { state.axes.splice(k, 1); renderAxes(); changed(); } }, icon(ICONS.x))));
     }));
-    el.querySelector("[data-add-axis]").disabled = state.axes.length >= MAX_AXES;
+    addButton.disabled = state.axes.length >= MAX_AXES;
     refreshGrid();
   }
 
@@ -119,10 +135,16 @@ export function gridEditor({ channels, preview, axes: initial = [], baseMaps = [
     }
     const y = column(state.axes[1].name);
     for (const v of bp[1]) shapes.push({ type: "line", y0: v, y1: v, xref: "paper", x0: 0, x1: 1, line });
-    react(coverage, [{ type: "scatter", mode: "markers", x, y, hoverinfo: "skip",
-      marker: { size: 4, color: t.text3, opacity: 0.55 } }],
-    baseLayout({ shapes, xaxis: axis(withUnit(state.axes[0].name, state.axes[0].unit)),
-      yaxis: axis(withUnit(state.axes[1].name, state.axes[1].unit)), margin: { l: 56, r: 10, t: 6, b: 40 } }), STATIC_CONFIG);
+    // A third axis colours the points (its breakpoints are listed on the colour bar).
+    const third = state.axes[2];
+    const marker = third
+      ? { size: 4, opacity: 0.7, color: column(third.name), colorscale: SCALE_VIRIDIS, showscale: true,
+        colorbar: { thickness: 10, outlinewidth: 0, title: { text: withUnit(third.name, third.unit), side: "right",
+          font: { size: 11, color: t.text2 } }, tickfont: { size: 10, color: t.text3 }, tickvals: bp[2], tickmode: "array" } }
+      : { size: 4, color: t.text3, opacity: 0.55 };
+    react(coverage, [{ type: "scatter", mode: "markers", x, y, hoverinfo: "skip", marker }],
+      baseLayout({ shapes, xaxis: axis(withUnit(state.axes[0].name, state.axes[0].unit)),
+        yaxis: axis(withUnit(state.axes[1].name, state.axes[1].unit)), margin: { l: 56, r: 10, t: 6, b: 40 } }), STATIC_CONFIG);
   }
 
   /* ---------- starting map ---------- */
@@ -130,8 +152,9 @@ export function gridEditor({ channels, preview, axes: initial = [], baseMaps = [
   const valuesHost = h("div", { "data-values-grid": "" });
   const lockToggle = h("input", { type: "checkbox", id: "grid-lock" });
   const lockCount = h("div", { class: "help", "aria-live": "polite" });
-  const baseSelect = h("select", { id: "base-map", name: "base_map_id", "data-field": "base_map_id" });
+  const baseSelect = h("select", { id: "base-map", name: BASE_FIELD, "data-field": BASE_FIELD });
   const baseFile = h("input", { type: "file", id: "base-map-file", accept: ".json,.csv,.dcm", name: "file" });
+  const baseInfo = h("div", { class: "help", "data-base-info": "" });
   const startPanel = h("div", {});
 
   const radios = [
@@ -141,17 +164,21 @@ export function gridEditor({ channels, preview, axes: initial = [], baseMaps = [
   ].map(([value, label]) =>
     h("label", { class: "check", for: `start-${value}` },
       h("input", { type: "radio", name: "start", id: `start-${value}`, value, checked: value === state.start,
-        onchange: () => { state.start = value; renderStart(); } }), label));
+        onchange: () => { state.start = value; renderStart(); changed(); } }), label));
   startHost.append(h("div", { class: "row", role: "radiogroup", "aria-label": "Starting map", style: { gap: "18px", marginBottom: "10px" } }, radios), startPanel);
 
   function renderStart() {
+    for (const r of radios) {
+      const input = r.firstChild;
+      input.checked = input.value === state.start;
+    }
     if (state.start === "constant") {
       startPanel.replaceChildren(h("p", { class: "help" }, "Every cell starts at the estimator's θ0 with variance P0."));
     } else if (state.start === "values") {
       startPanel.replaceChildren(
         h("div", { class: "row", style: { marginBottom: "8px" } },
           h("label", { for: "grid-fill", style: { margin: 0 } }, "Fill"), fill,
-          h("button", { type: "button", class: "small", onclick: () => { state.values = null; renderValues(); } }, "Fill all"),
+          h("button", { type: "button", class: "small", onclick: () => { state.values = null; renderValues(); changed(); } }, "Fill all"),
           h("span", { class: "spacer" }),
           h("label", { class: "check", for: "grid-lock" }, lockToggle, "Lock mode (click a cell to lock it)")),
         valuesHost);
@@ -162,7 +189,8 @@ export function gridEditor({ channels, preview, axes: initial = [], baseMaps = [
         h("div", { class: "fields two" },
           h("div", { class: "field" }, h("label", { for: "base-map" }, "Base map"), baseSelect),
           h("div", { class: "field" }, h("label", { for: "base-map-file" }, "…or upload a map (JSON, CSV, DCM)"), baseFile)),
-        h("div", { class: "help", "data-base-info": "" }));
+        baseInfo);
+      describeBase();
     }
   }
 
@@ -172,28 +200,44 @@ export function gridEditor({ channels, preview, axes: initial = [], baseMaps = [
     return state.axes.map((a) => safeList(a.text).length);
   }
 
+  /** The typed values as a table of axis 0 × axis 1; a third axis is edited one slice at a time. */
   function renderValues() {
     const dims = shape();
     const bps = state.axes.map((a) => safeList(a.text));
     const f = Number(fill.value) || 0;
     if (!state.values || !sameShape(state.values, dims)) state.values = blank(dims, f);
-    const rows = dims.length === 1 ? [state.values] : state.values;
+    if (dims.some((n) => n === 0)) {
+      valuesHost.replaceChildren(h("p", { class: "help" }, "Fix the breakpoints first."));
+      return;
+    }
+    const three = dims.length === 3;
+    state.slice = Math.min(state.slice, three ? dims[2] - 1 : 0);
+    const k = state.slice;
+    const flatOf = (i, j) => (dims.length === 1 ? j : three ? (i * dims[1] + j) * dims[2] + k : i * dims[1] + j);
+    const get = (i, j) => (dims.length === 1 ? state.values[j] : three ? state.values[i][j][k] : state.values[i][j]);
+    const set = (i, j, v) => {
+      if (dims.length === 1) state.values[j] = v;
+      else if (three) state.values[i][j][k] = v;
+      else state.values[i][j] = v;
+    };
+    const rows = dims.length === 1 ? [0] : [...Array(dims[0]).keys()];
+    const cols = dims.length === 1 ? dims[0] : dims[1];
+    const where = (i, j) => (dims.length === 1 ? `${state.axes[0].name} = ${bps[0][j]}`
+      : `${state.axes[0].name} = ${bps[0][i]}, ${state.axes[1].name} = ${bps[1][j]}` +
+        (three ? `, ${state.axes[2].name} = ${bps[2][k]}` : ""));
     const table = h("table", {},
       h("thead", {}, h("tr", {}, h("th", { class: "rowh" }, dims.length === 1 ? "" : `${state.axes[0].name} ↓ / ${state.axes[1].name} →`),
         (dims.length === 1 ? bps[0] : bps[1]).map((v) => h("th", { scope: "col" }, fmt(v))))),
-      h("tbody", {}, rows.map((row, i) =>
+      h("tbody", {}, rows.map((i) =>
         h("tr", {},
           h("th", { class: "rowh", scope: "row" }, dims.length === 1 ? state.axes[0].name : fmt(bps[0][i])),
-          row.map((v, j) => {
-            const flatIndex = dims.length === 1 ? j : i * dims[1] + j;
-            const input = h("input", { type: "number", step: "any", value: String(v),
-              "aria-label": dims.length === 1 ? `Cell ${state.axes[0].name} = ${bps[0][j]}`
-                : `Cell ${state.axes[0].name} = ${bps[0][i]}, ${state.axes[1].name} = ${bps[1][j]}`,
+          [...Array(cols).keys()].map((j) => {
+            const flatIndex = flatOf(i, j);
+            const input = h("input", { type: "number", step: "any", value: String(get(i, j)), "aria-label": `Cell ${where(i, j)}`,
               class: state.locked.has(flatIndex) ? "locked" : null, dataset: { cell: flatIndex } });
             input.addEventListener("change", () => {
-              const val = Number(input.value);
-              if (dims.length === 1) state.values[j] = val;
-              else state.values[i][j] = val;
+              set(i, j, Number(input.value));
+              changed();
             });
             const toggleLock = () => {
               if (state.locked.has(flatIndex)) state.locked.delete(flatIndex);
@@ -201,6 +245,7 @@ export function gridEditor({ channels, preview, axes: initial = [], baseMaps = [
               input.classList.toggle("locked", state.locked.has(flatIndex));
               input.title = state.locked.has(flatIndex) ? "locked" : "";
               lockCount.textContent = lockText();
+              changed();
             };
             input.addEventListener("click", () => state.lockMode && toggleLock());
             input.addEventListener("keydown", (e) => {
@@ -211,7 +256,19 @@ export function gridEditor({ channels, preview, axes: initial = [], baseMaps = [
             });
             return h("td", {}, input);
           })))));
-    valuesHost.replaceChildren(h("div", { class: "values-grid" }, table), lockCount);
+    let picker = null;
+    if (three) {
+      const a2 = state.axes[2];
+      const select = h("select", { id: "grid-slice", "data-grid-slice": "" },
+        bps[2].map((v, n) => h("option", { value: String(n), selected: n === k }, `${fmt(v)}${a2.unit ? ` ${a2.unit}` : ""}`)));
+      select.addEventListener("change", () => {
+        state.slice = Number(select.value);
+        renderValues();
+        valuesHost.querySelector(SELECT.id(select.id))?.focus();
+      });
+      picker = h("div", { class: "field slice-picker" }, h("label", { for: "grid-slice" }, `Slice at ${a2.name}`), select);
+    }
+    valuesHost.replaceChildren(...[picker, h("div", { class: "values-grid" }, table), lockCount].filter(Boolean));
     lockCount.textContent = lockText();
   }
 
@@ -220,37 +277,44 @@ export function gridEditor({ channels, preview, axes: initial = [], baseMaps = [
   }
 
   function renderBaseOptions() {
+    const id = state.baseMap?.id ?? null;
     baseSelect.replaceChildren(h("option", { value: "" }, state.baseMaps.length ? "— choose —" : "no base maps yet"),
-      ...state.baseMaps.map((m) => h("option", { value: String(m.id), selected: m.id === state.baseMapId },
-        `#${m.id} ${m.name}`)));
+      ...state.baseMaps.map((m) => h("option", { value: String(m.id), selected: m.id === id }, `#${m.id} ${m.name}`)));
   }
 
-  function applyBaseMap(map) {
-    state.baseMapId = map?.id ?? null;
-    const info = el.querySelector("[data-base-info]");
+  function describeBase() {
+    const map = state.baseMap;
     if (!map) {
-      if (info) info.textContent = "";
+      baseInfo.textContent = "";
       return;
     }
-    if (map.axes?.length) {
+    const lin = map.lineage;
+    baseInfo.textContent = `${map.axes?.map((a) => `${a.name} (${a.breakpoints.length})`).join(" × ") ?? ""}` +
+      (lin?.run_id ? ` · from run #${lin.run_id}, version ${lin.version_id} (${lin.estimator})` : "");
+  }
+
+  /** Take a base map's grid (axes and breakpoints) unless keepAxes (a restored draft). */
+  function applyBaseMap(map, { keepAxes = false } = {}) {
+    state.baseMap = map ?? null;
+    if (map?.axes?.length && !keepAxes) {
       state.axes = map.axes.map((a) => ({ name: a.name, unit: a.unit ?? "", text: a.breakpoints.join(", "), n: a.breakpoints.length }));
-      state.values = map.values;
       renderAxes();
     }
-    if (info) {
-      const lin = map.lineage;
-      info.textContent = `${map.axes?.map((a) => `${a.name} (${a.breakpoints.length})`).join(" × ") ?? ""}` +
-        (lin?.run_id ? ` · from run #${lin.run_id}, version ${lin.version_id} (${lin.estimator})` : "");
-    }
+    describeBase();
   }
 
   baseSelect.addEventListener("change", async () => {
     const id = Number(baseSelect.value);
-    if (!id) return applyBaseMap(null);
+    if (!id) {
+      applyBaseMap(null);
+      changed();
+      return;
+    }
     try {
       applyBaseMap(await api.get(`/api/base-maps/${id}`));
+      changed();
     } catch (err) {
-      showError(el, Object.assign(err, { field: "base_map_id" }));
+      showError(el, Object.assign(err, { field: BASE_FIELD }));
     }
   });
 
@@ -263,31 +327,63 @@ export function gridEditor({ channels, preview, axes: initial = [], baseMaps = [
     try {
       const map = await api.upload("/api/base-maps", body);
       state.baseMaps.unshift(map);
-      state.baseMapId = map.id;
+      state.baseMap = map;
       renderBaseOptions();
       applyBaseMap(map);
+      changed();
     } catch (err) {
-      showError(el, Object.assign(err, { field: "base_map_id" }));
+      showError(el, Object.assign(err, { field: BASE_FIELD }));
     }
   });
 
-  for (const name of initial.length ? initial : []) addAxis(name);
-  if (!state.axes.length && channels.length) {
-    addAxis(channels[0].name);
-    if (channels.length > 2) addAxis(channels[1].name);
+  /* ---------- start ---------- */
+  const names = new Set(channels.map((c) => c.name));
+  const savedAxes = (saved?.axes ?? []).filter((a) => names.has(a?.name)).slice(0, MAX_AXES);
+  if (savedAxes.length) {
+    state.axes = savedAxes.map((a) => ({ name: a.name, unit: String(a.unit ?? ""), text: String(a.text ?? ""),
+      n: Number(a.n) || DEFAULT_BREAKPOINTS }));
+    state.start = ["constant", "values", "base"].includes(saved.start) ? saved.start : "constant";
+    state.values = saved.values ?? null;
+    state.locked = new Set((saved.locked ?? []).filter(Number.isInteger));
+    state.slice = Number(saved.slice) || 0;
+    renderAxes();
+    if (saved.baseMapId) {
+      const known = state.baseMaps.find((m) => m.id === saved.baseMapId);
+      if (known) applyBaseMap(known, { keepAxes: true });
+    }
+  } else {
+    for (const name of initial) addAxis(name);
+    if (!state.axes.length && channels.length) {
+      addAxis(channels[0].name);
+      if (channels.length > 2) addAxis(channels[1].name);
+    }
   }
   renderStart();
 
   return {
     el,
     /** Point the axes at these columns (e.g. after the dataset or mapping changed). */
-    setAxes(names) {
+    setAxes(list) {
       state.axes = [];
-      for (const n of names.slice(0, MAX_AXES)) addAxis(n);
+      for (const n of list.slice(0, MAX_AXES)) addAxis(n);
     },
     redraw: drawCoverage,
     destroy: () => purge(coverage),
-    /** {table, base_map_id, locked}; throws Error with .field on unreadable breakpoints. */
+    /** What a reload needs to show the same editor (JSON-serialisable). */
+    snapshot() {
+      return {
+        axes: state.axes.map((a) => ({ ...a })),
+        start: state.start,
+        values: state.start === "values" ? state.values : null,
+        locked: [...state.locked],
+        slice: state.slice,
+        baseMapId: state.baseMap?.id ?? null,
+      };
+    },
+    /**
+     * {table, base_map_id, locked}; throws an Error with .field (shown next to that control)
+     * for unreadable breakpoints, a missing base map, or a grid that no longer matches it.
+     */
     read() {
       const axes = state.axes.map((a, k) => {
         let breakpoints;
@@ -299,18 +395,51 @@ export function gridEditor({ channels, preview, axes: initial = [], baseMaps = [
         if (breakpoints.length < 2) {
           throw Object.assign(new Error("at least two breakpoints are needed"), { field: `table.axes.${k}.breakpoints` });
         }
+        const bad = breakpoints.findIndex((v, i) => i > 0 && !(v > breakpoints[i - 1]));
+        if (bad > 0) {
+          throw Object.assign(new Error(`breakpoints must be strictly increasing: ${breakpoints[bad]} follows ${breakpoints[bad - 1]}`),
+            { field: `table.axes.${k}.breakpoints` });
+        }
         return { name: a.name, breakpoints, unit: a.unit || undefined };
       });
       const table = { axes };
-      if (state.start === "values" && state.values) table.values = state.values;
-      if (state.start === "base" && state.values) table.values = state.values;
+      let baseMapId = null;
+      if (state.start === "values") {
+        const dims = axes.map((a) => a.breakpoints.length);
+        if (!state.values || !sameShape(state.values, dims)) state.values = blank(dims, Number(fill.value) || 0);
+        table.values = state.values;
+      } else if (state.start === "base") {
+        const map = state.baseMap;
+        if (!map) {
+          throw Object.assign(new Error("Choose a base map (or upload one), or pick another starting map."), { field: BASE_FIELD });
+        }
+        const mismatch = gridMismatch(map.axes ?? [], axes);
+        if (mismatch) {
+          throw Object.assign(new Error(`The grid no longer matches base map #${map.id}: ${mismatch}. ` +
+            "Choose the map again to take its grid, or start from another map."), { field: BASE_FIELD });
+        }
+        table.values = map.values;
+        baseMapId = map.id;
+      }
       return {
         table,
-        base_map_id: state.start === "base" ? state.baseMapId : null,
+        base_map_id: baseMapId,
         locked: state.start === "values" && state.locked.size ? [...state.locked].sort((a, b) => a - b) : null,
       };
     },
   };
+}
+
+/** Why a base map's axes differ from the form's (null when they match), in words. */
+function gridMismatch(mapAxes, axes) {
+  if (mapAxes.length !== axes.length) return `it has ${mapAxes.length} axes, the form ${axes.length}`;
+  for (let k = 0; k < axes.length; k += 1) {
+    const a = mapAxes[k].breakpoints;
+    const b = axes[k].breakpoints;
+    const same = a.length === b.length && a.every((v, i) => Math.abs(v - b[i]) <= 1e-9 * Math.max(1, Math.abs(v)));
+    if (!same) return `axis ${k + 1} (${axes[k].name}) has other breakpoints`;
+  }
+  return null;
 }
 
 function safeList(text) {
@@ -321,12 +450,14 @@ function safeList(text) {
   }
 }
 
+/** A table of the given shape filled with f (nested lists in axis order). */
 function blank(dims, f) {
   if (dims.length === 1) return Array(dims[0]).fill(f);
-  return Array.from({ length: dims[0] }, () => Array(dims[1]).fill(f));
+  return Array.from({ length: dims[0] }, () => blank(dims.slice(1), f));
 }
 
 function sameShape(values, dims) {
-  if (dims.length === 1) return Array.isArray(values) && !Array.isArray(values[0]) && values.length === dims[0];
-  return Array.isArray(values?.[0]) && values.length === dims[0] && values[0].length === dims[1];
+  if (!Array.isArray(values) || values.length !== dims[0]) return false;
+  if (dims.length === 1) return values.every((v) => !Array.isArray(v));
+  return values.every((v) => sameShape(v, dims.slice(1)));
 }

@@ -1,7 +1,8 @@
 /** Boots the dashboard: theme, navigation, health indicator, auth prompt and the router. */
 import { api, onUnauthorized, setToken } from "./api.js";
 import { EVT, SEL, STORAGE } from "./constants.js";
-import { h, icon, ICONS, qs, qsa } from "./dom.js";
+import { h, icon, ICONS, qs, qsa, toast } from "./dom.js";
+import { loadPlotly } from "./plot.js";
 import { Router } from "./router.js";
 import * as compare from "./views/compare.js";
 import * as datasets from "./views/datasets.js";
@@ -67,7 +68,7 @@ async function pollHealth() {
 }
 
 function askForToken() {
-  if (qs("dialog[data-token]")) return;
+  if (qs(SEL.tokenDialog)) return;
   const input = h("input", { type: "password", id: "token-input", autocomplete: "off" });
   const dialog = h(
     "dialog",
@@ -96,7 +97,9 @@ function boot() {
   onUnauthorized(askForToken);
   window.addEventListener(EVT.currentRun, (e) => showCurrentRun(e.detail));
   const router = new Router(ROUTES, qs(SEL.main), { onChange: (section) => highlightNav(section) });
-  router.start();
+  // The first view is on screen before the browser spends its second on Plotly.js.
+  const plots = () => loadPlotly().catch((err) => toast(`Plots are unavailable: ${err.message}`, { error: true, ms: 10000 }));
+  router.start().finally(() => requestAnimationFrame(() => setTimeout(plots, 0)));
   pollHealth();
   setInterval(pollHealth, 15000);
 }

@@ -1,22 +1,47 @@
 /**
  * One look-up table drawn with Plotly: heatmap (or 3-D surface) of the values, of the
  * variances (diag P, log colour scale) or of a difference, with the operating-point trail
- * and the active cell over it. Colour ranges are fixed per plot (they only widen when a value
- * leaves them), so successive frames of a run are comparable.
+ * and the active cell over it. Tables of three (or more) axes are shown as a 2-D slice with a
+ * slider per further axis, labelled with that axis' name, breakpoint value and unit; plots in
+ * one SliceGroup follow each other's slice. Colour ranges are fixed per plot: pinned with
+ * setRange (cells beyond it saturate at the ends of the scale), or else seeded from the first
+ * frame on "nice" bounds and widened only when a value leaves them, in quarter-span steps, so
+ * the same values always give the same range and successive frames stay comparable.
  */
 import { fmt, h, withUnit } from "./dom.js";
 import {
   axis, baseLayout, decadeTicks, hasWebGL, purge, react, SCALE_DIFF, SCALE_VALUE, SCALE_VARIANCE, SCALE_VIRIDIS, theme,
+  withAlpha,
 } from "./plot.js";
 
 const TINY = 1e-300;
+/** Trace names (also what tests and hover look for). */
+export const TRACE = Object.freeze({ trail: "trail", point: "operating point", active: "active cell" });
+let uid = 0;
+
+/**
+ * Plots that follow each other's slice (by breakpoint value of the axis with the same name);
+ * it remembers the last value per axis, so plots drawn anew (a re-rendered view) keep it.
+ */
+export class SliceGroup {
+  constructor() {
+    this.plots = new Set();
+    this.values = new Map();
+  }
+
+  moved(from, name, value) {
+    this.values.set(name, value);
+    for (const p of this.plots) if (p !== from) p.showSliceValue(name, value);
+  }
+}
 
 export class MapPlot {
   /**
    * @param {HTMLElement} el
-   * @param {{kind?: "value"|"variance"|"visits"|"diff", unit?: string, label?: string, mode?: "heatmap"|"surface"}} opts
+   * @param {{kind?: "value"|"variance"|"visits"|"diff", unit?: string, label?: string, mode?: "heatmap"|"surface",
+   *   gaps?: boolean, slices?: SliceGroup}} opts
    */
-  constructor(el, { kind = "value", unit = "", label = "value", mode = "heatmap", gaps = true } = {}) {
+  constructor(el, { kind = "value", unit = "", label = "value", mode = "heatmap", gaps = true, slices = null } = {}) {
     this.el = el;
     this.kind = kind;
     this.unit = unit;
@@ -25,11 +50,15 @@ export class MapPlot {
     this.gaps = gaps;
     this.range = null;
     this.fixed = false;
+    this.extremes = null;
     this.last = null;
     this.bar = null;
+    this.slices = slices;
+    slices?.plots.add(this);
+    this.slice = { key: "", axes: [], index: [], inputs: [], labels: [], host: null };
   }
 
-  /** Pin the colour range (e.g. shared by several maps); null returns to widen-only. */
+  /** Pin the colour range (e.g. shared by several maps, or fixed per run); null returns to widen-only. */
   setRange(range) {
     this.range = range ? [...range] : null;
     this.fixed = Boolean(range);
@@ -40,9 +69,17 @@ export class MapPlot {
     if (this.last) this.render(this.last);
   }
 
-  destroy() {
+  /** Remove the drawing (the plot can render again later). */
+  clear() {
     purge(this.el);
     this.bar?.clear();
+    this.slice.host?.replaceChildren();
+    this.slice = { ...this.slice, key: "", axes: [], index: [], inputs: [], labels: [] };
+  }
+
+  destroy() {
+    this.clear();
+    this.slices?.plots.delete(this);
   }
 
   /**
@@ -53,20 +90,101 @@ export class MapPlot {
     const { axes, values } = frame;
     if (!axes?.length || !values) return null;
     if (!this.bar && this.el.parentElement) this.bar = new ColorBar(this.el, this.kind); // before Plotly sizes the plot
-    const z = this.kind === "variance" ? logNested(frame.variances ?? values)
+    const full = this.kind === "variance" ? logNested(frame.variances ?? values)
       : this.kind === "visits" ? (frame.visits ?? values) : values;
-    this.widen(z);
-    if (axes.length === 1) {
+    this.widen(full);
+    this.syncSlicer(axes);
+    const shown = axes.length > 2 ? this.sliced(frame) : frame;
+    const z = axes.length > 2 ? sliceNested(full, this.slice.index) : full;
+    if (shown.axes.length === 1) {
       this.bar?.clear();
-      return react(this.el, ...this.figure1d(frame, z));
+      return react(this.el, ...this.figure1d(shown, z));
     }
     if (this.mode === "surface" && this.kind === "value") {
       this.bar?.clear();
-      return react(this.el, ...this.surface(frame, z));
+      return react(this.el, ...this.surface(shown, z));
     }
-    const drawn = react(this.el, ...this.heatmap(frame, z));
+    const drawn = react(this.el, ...this.heatmap(shown, z));
     this.drawBar();
+    // A plot drawn later (Plotly.js still loading) sizes its colour bar once it is there.
+    if (!this.el._fullLayout) Promise.resolve(drawn).then(() => this.drawBar());
     return drawn;
+  }
+
+  /* ---------- slices of 3-D (and higher) tables ---------- */
+
+  /** One slider per axis beyond the second; rebuilt only when those axes change. */
+  syncSlicer(axes) {
+    const extra = axes.slice(2);
+    const key = JSON.stringify(extra.map((a) => [a.name, a.unit ?? "", a.breakpoints]));
+    if (key === this.slice.key) return;
+    const old = this.slice;
+    const index = extra.map((a) => {
+      const k = old.axes.findIndex((o) => o.name === a.name);
+      if (k >= 0) return nearest(a.breakpoints, old.axes[k].breakpoints[old.index[k]]);
+      const remembered = this.slices?.values.get(a.name);
+      return remembered === undefined ? 0 : nearest(a.breakpoints, remembered);
+    });
+    if (!this.slice.host && extra.length) {
+      this.slice.host = h("div", { class: "slice-pickers", "data-slice-pickers": "" });
+      const anchor = this.bar?.wrap ?? this.el;
+      anchor.parentElement?.insertBefore(this.slice.host, anchor);
+    }
+    this.slice = { ...this.slice, key, axes: extra, index, inputs: [], labels: [] };
+    const pickers = extra.map((a, k) => {
+      uid += 1;
+      const id = `slice-${uid}`;
+      const input = h("input", { type: "range", id, min: "0", max: String(a.breakpoints.length - 1), step: "1",
+        value: String(index[k]), "data-slice-axis": a.name });
+      const label = h("label", { for: id, class: "slice-label" });
+      input.addEventListener("input", () => {
+        this.slice.index[k] = Number(input.value);
+        this.describeSlice(k);
+        if (this.last) this.render(this.last);
+        this.slices?.moved(this, a.name, a.breakpoints[this.slice.index[k]]);
+      });
+      this.slice.inputs.push(input);
+      this.slice.labels.push(label);
+      return h("div", { class: "slice-picker", "data-slice-picker": a.name }, label, input);
+    });
+    this.slice.host?.replaceChildren(...pickers);
+    extra.forEach((_, k) => this.describeSlice(k));
+  }
+
+  describeSlice(k) {
+    const a = this.slice.axes[k];
+    const text = `${a.name} = ${fmt(a.breakpoints[this.slice.index[k]])}${a.unit ? ` ${a.unit}` : ""}`;
+    this.slice.labels[k].textContent = `Slice at ${text}`;
+    this.slice.inputs[k].setAttribute("aria-valuetext", text);
+  }
+
+  /** Another plot of the group moved to `value` of axis `name`: show the nearest breakpoint. */
+  showSliceValue(name, value) {
+    const k = this.slice.axes.findIndex((a) => a.name === name);
+    if (k < 0) return;
+    const i = nearest(this.slice.axes[k].breakpoints, value);
+    if (i === this.slice.index[k]) return;
+    this.slice.index[k] = i;
+    this.slice.inputs[k].value = String(i);
+    this.describeSlice(k);
+    if (this.last) this.render(this.last);
+  }
+
+  /** The 2-D frame of the chosen slice; the active cell only when it lies in that slice. */
+  sliced(frame) {
+    const idx = this.slice.index;
+    const cut = (m) => (m ? sliceNested(m, idx) : m);
+    const cell = frame.activeCell;
+    const inSlice = Array.isArray(cell) && cell.length === frame.axes.length && idx.every((k, n) => cell[n + 2] === k);
+    return {
+      ...frame,
+      axes: frame.axes.slice(0, 2),
+      values: cut(frame.values),
+      variances: cut(frame.variances),
+      visits: cut(frame.visits),
+      activeCell: inSlice ? cell.slice(0, 2) : null,
+      sliceText: this.slice.axes.map((a, k) => `${a.name} = ${fmt(a.breakpoints[idx[k]])} ${a.unit ?? ""}`).join("<br>"),
+    };
   }
 
   /**
@@ -76,6 +194,7 @@ export class MapPlot {
   drawBar() {
     if (!this.bar) return;
     const size = this.el._fullLayout?._size;
+    const [lo, hi] = this.extremes ?? [null, null];
     this.bar.draw({
       scale: this.scale(),
       range: this.range,
@@ -83,14 +202,20 @@ export class MapPlot {
       title: this.kind === "variance" || this.kind === "visits" ? this.kind : this.unit,
       top: size?.t ?? 8,
       height: size?.h ?? null,
+      clipped: { lo: this.range !== null && lo < this.range[0], hi: this.range !== null && hi > this.range[1] },
     });
   }
 
   widen(z) {
     const flat = z.flat(Infinity).filter((v) => v !== null && Number.isFinite(v));
     if (!flat.length) return;
-    let lo = Math.min(...flat);
-    let hi = Math.max(...flat);
+    let lo = Infinity;
+    let hi = -Infinity;
+    for (const v of flat) {
+      if (v < lo) lo = v;
+      if (v > hi) hi = v;
+    }
+    this.extremes = [lo, hi];
     if (this.kind === "diff") {
       if (this.fixed && this.range) return;
       const m = Math.max(Math.abs(lo), Math.abs(hi)) || 1;
@@ -98,13 +223,16 @@ export class MapPlot {
       return;
     }
     if (this.fixed && this.range) return;
-    if (hi === lo) {
-      const pad = Math.abs(hi) * 0.05 || (this.kind === "variance" ? 0.5 : 1);
-      lo -= pad;
-      hi += pad;
+    if (!this.range) {
+      this.range = niceRange(lo, hi, { log: this.kind === "variance" });
+      return;
     }
-    if (!this.range) this.range = [lo, hi];
-    else this.range = [Math.min(this.range[0], lo), Math.max(this.range[1], hi)];
+    // Widen in steps of a quarter of the current span: a function of the values only.
+    const [r0, r1] = this.range;
+    const step = (r1 - r0) / 4;
+    if (lo < r0 || hi > r1) {
+      this.range = [lo < r0 ? r0 - step * Math.ceil((r0 - lo) / step) : r0, hi > r1 ? r1 + step * Math.ceil((hi - r1) / step) : r1];
+    }
   }
 
   colorbar() {
@@ -125,9 +253,10 @@ export class MapPlot {
     return SCALE_VIRIDIS;
   }
 
-  hover(axes) {
+  hover(axes, sliceText = "") {
     const [a0, a1] = axes;
-    const head = `${a0.name} = %{x} ${a0.unit ?? ""}` + (a1 ? `<br>${a1.name} = %{y} ${a1.unit ?? ""}` : "");
+    const head = `${a0.name} = %{x} ${a0.unit ?? ""}` + (a1 ? `<br>${a1.name} = %{y} ${a1.unit ?? ""}` : "") +
+      (sliceText ? `<br>${sliceText}` : "");
     const name = this.kind === "diff" ? `Δ ${this.label}` : this.label;
     return `${head}<br><b>${name} = %{customdata[0]} ${this.unit}</b><br>variance = %{customdata[1]}<br>visits = %{customdata[2]}<extra></extra>`;
   }
@@ -143,7 +272,7 @@ export class MapPlot {
         x, y,
         z: transpose(z),
         customdata: cellText(frame),
-        hovertemplate: this.hover(frame.axes),
+        hovertemplate: this.hover(frame.axes, frame.sliceText),
         colorscale: this.scale(),
         zmin: this.range?.[0], zmax: this.range?.[1],
         zauto: false,
@@ -155,11 +284,11 @@ export class MapPlot {
     const trail = frame.trail;
     if (trail?.x?.length) {
       data.push(
-        { type: "scatter", mode: "lines", x: trail.x, y: trail.y, hoverinfo: "skip", showlegend: false,
-          line: { color: "rgba(255,255,255,0.85)", width: 1.5 } },
-        { type: "scatter", mode: "markers", x: [trail.x.at(-1)], y: [trail.y.at(-1)], showlegend: false,
+        { type: "scatter", mode: "lines", name: TRACE.trail, x: trail.x, y: trail.y, hoverinfo: "skip", showlegend: false,
+          line: { color: withAlpha(t.trail, 0.85), width: 1.5 } },
+        { type: "scatter", mode: "markers", name: TRACE.point, x: [trail.x.at(-1)], y: [trail.y.at(-1)], showlegend: false,
           hovertemplate: `operating point<br>${a0.name} = %{x:.4g}<br>${a1.name} = %{y:.4g}<extra></extra>`,
-          marker: { size: 11, color: "#ffffff", line: { color: "#0b0e13", width: 2 } } },
+          marker: { size: 11, color: t.trail, line: { color: t.trailEdge, width: 2 } } },
       );
     }
     const cell = frame.activeCell;
@@ -167,8 +296,8 @@ export class MapPlot {
       // The active cell is the table entry with the largest interpolation weight: its brick.
       const [x0, x1] = brick(x, cell[0]);
       const [y0, y1] = brick(y, cell[1]);
-      data.push({ type: "scatter", mode: "lines", x: [x0, x1, x1, x0, x0], y: [y0, y0, y1, y1, y0],
-        hoverinfo: "skip", showlegend: false, line: { color: "#22d3ee", width: 2.5 } });
+      data.push({ type: "scatter", mode: "lines", name: TRACE.active, x: [x0, x1, x1, x0, x0], y: [y0, y0, y1, y1, y0],
+        hoverinfo: "skip", showlegend: false, line: { color: t.activeCell, width: 2.5 } });
     }
     const layout = baseLayout({
       xaxis: axis(withUnit(a0.name, a0.unit), { range: edges(x), autorange: false, showgrid: false, zeroline: false }),
@@ -187,7 +316,7 @@ export class MapPlot {
         type: "surface",
         x: a0.breakpoints, y: a1.breakpoints, z: transpose(z),
         customdata: cellText(frame),
-        hovertemplate: this.hover(frame.axes),
+        hovertemplate: this.hover(frame.axes, frame.sliceText),
         colorscale: this.scale(), cmin: this.range?.[0], cmax: this.range?.[1], cauto: false,
         colorbar: this.colorbar(),
         contours: { z: { show: false } },
@@ -197,10 +326,28 @@ export class MapPlot {
     const trail = frame.trail;
     if (trail?.x?.length) {
       const zs = trail.x.map((xv, k) => interp2(frame.axes, frame.values, xv, trail.y[k]));
-      data.push({ type: "scatter3d", mode: "lines", x: trail.x, y: trail.y, z: zs, hoverinfo: "skip", showlegend: false,
-        line: { color: "#ffffff", width: 3 } });
-      data.push({ type: "scatter3d", mode: "markers", x: [trail.x.at(-1)], y: [trail.y.at(-1)], z: [zs.at(-1)],
-        showlegend: false, hoverinfo: "skip", marker: { size: 5, color: "#22d3ee" } });
+      data.push({ type: "scatter3d", mode: "lines", name: TRACE.trail, x: trail.x, y: trail.y, z: zs, hoverinfo: "skip",
+        showlegend: false, line: { color: t.trail, width: 3 } });
+      data.push({ type: "scatter3d", mode: "markers", name: TRACE.point, x: [trail.x.at(-1)], y: [trail.y.at(-1)], z: [zs.at(-1)],
+        showlegend: false, hoverinfo: "skip", marker: { size: 5, color: t.trail, line: { color: t.trailEdge, width: 1 } } });
+    }
+    const cell = frame.activeCell;
+    if (cell && cell.length >= 2) {
+      // The active cell's brick outlined on the surface, lifted a little so it stays visible.
+      const [x0, x1] = brick(a0.breakpoints, cell[0]);
+      const [y0, y1] = brick(a1.breakpoints, cell[1]);
+      const lift = this.range ? (this.range[1] - this.range[0]) * 0.01 : 0;
+      const xs = [];
+      const ys = [];
+      for (const [xa, ya, xb, yb] of [[x0, y0, x1, y0], [x1, y0, x1, y1], [x1, y1, x0, y1], [x0, y1, x0, y0]]) {
+        for (let k = 0; k <= 6; k += 1) {
+          xs.push(xa + ((xb - xa) * k) / 6);
+          ys.push(ya + ((yb - ya) * k) / 6);
+        }
+      }
+      const zs = xs.map((xv, k) => interp2(frame.axes, frame.values, xv, ys[k]) + lift);
+      data.push({ type: "scatter3d", mode: "lines", name: TRACE.active, x: xs, y: ys, z: zs, hoverinfo: "skip",
+        showlegend: false, line: { color: t.activeCell, width: 6 } });
     }
     const sceneAxis = (title) => ({
       title: { text: title, font: { size: 11, color: t.text2 } }, gridcolor: t.grid, zerolinecolor: t.line,
@@ -230,7 +377,7 @@ export class MapPlot {
         { x, y: z.map((v, k) => (v === null || sd[k] === null ? null : v + 2 * sd[k])), mode: "lines",
           line: { width: 0 }, hoverinfo: "skip", showlegend: false },
         { x, y: z.map((v, k) => (v === null || sd[k] === null ? null : v - 2 * sd[k])), mode: "lines",
-          line: { width: 0 }, fill: "tonexty", fillcolor: "rgba(59,130,246,0.18)", hoverinfo: "skip", name: "±2σ" },
+          line: { width: 0 }, fill: "tonexty", fillcolor: withAlpha(t.accent, 0.18), hoverinfo: "skip", name: "±2σ" },
       );
     }
     data.push({
@@ -242,8 +389,8 @@ export class MapPlot {
     const trail = frame.trail;
     if (trail?.x?.length && this.kind === "value") {
       const xv = trail.x.at(-1);
-      data.push({ x: [xv], y: [interp1(x, z, xv)], mode: "markers", showlegend: false, hoverinfo: "skip",
-        marker: { size: 11, color: "#22d3ee", line: { color: "#0b0e13", width: 2 } } });
+      data.push({ x: [xv], y: [interp1(x, z, xv)], mode: "markers", name: TRACE.point, showlegend: false, hoverinfo: "skip",
+        marker: { size: 11, color: t.activeCell, line: { color: t.trailEdge, width: 2 } } });
     }
     const layout = baseLayout({
       xaxis: axis(withUnit(a0.name, a0.unit)),
@@ -253,6 +400,26 @@ export class MapPlot {
     });
     return [data, layout];
   }
+}
+
+/**
+ * A colour range on "nice" bounds around [lo, hi] (whole decades for log-coded variances):
+ * the same values always give the same range.
+ */
+export function niceRange(lo, hi, { log = false } = {}) {
+  if (!(Number.isFinite(lo) && Number.isFinite(hi))) return null;
+  if (log) {
+    const a = Math.floor(lo);
+    const b = Math.ceil(hi);
+    return [a, b > a ? b : a + 1];
+  }
+  if (hi <= lo) {
+    const pad = Math.abs(hi) * 0.05 || 1;
+    lo -= pad;
+    hi += pad;
+  }
+  const step = niceStep(hi - lo, 10);
+  return [Math.floor(lo / step) * step, Math.ceil(hi / step) * step];
 }
 
 /* ---------- helpers ---------- */
@@ -274,6 +441,19 @@ function brick(bp, k) {
 function edges(bp) {
   if (bp.length < 2) return [bp[0] - 1, bp[0] + 1];
   return [bp[0] - (bp[1] - bp[0]) / 2, bp.at(-1) + (bp.at(-1) - bp.at(-2)) / 2];
+}
+
+/** Index of the breakpoint nearest to v. */
+function nearest(bp, v) {
+  let best = 0;
+  for (let i = 1; i < bp.length; i += 1) if (Math.abs(bp[i] - v) < Math.abs(bp[best] - v)) best = i;
+  return best;
+}
+
+/** m[i][j][k][l]… → m[i][j] at the given indices of the axes beyond the second. */
+export function sliceNested(m, idx) {
+  if (!Array.isArray(m)) return m;
+  return m.map((row) => row.map((cell) => idx.reduce((c, k) => (Array.isArray(c) ? c[k] ?? null : null), cell)));
 }
 
 /** values[i][j] (i along axis 0 = x) → z[j][i] (Plotly rows are y). */
@@ -348,6 +528,7 @@ class ColorBar {
     const wrap = h("div", { class: "mapplot" });
     plotEl.parentElement.insertBefore(wrap, plotEl);
     wrap.append(plotEl);
+    this.wrap = wrap;
     this.el = h("div", { class: "cbar", "aria-hidden": "true", dataset: { colorbarFor: plotEl.dataset.plot ?? kind } });
     wrap.append(this.el);
     this.key = "";
@@ -358,9 +539,9 @@ class ColorBar {
     this.key = "";
   }
 
-  draw({ scale, range, log, title, top, height }) {
+  draw({ scale, range, log, title, top, height, clipped = { lo: false, hi: false } }) {
     if (!range) return;
-    const key = JSON.stringify([range, log, title, top, height, scale[0][1]]);
+    const key = JSON.stringify([range, log, title, top, height, scale[0][1], clipped]);
     if (key === this.key) return;
     this.key = key;
     const [lo, hi] = range;
@@ -371,6 +552,11 @@ class ColorBar {
       top: `${top}px`, height: height ? `${height}px` : "80%" } },
       ticks.filter((t) => t.v >= lo - 1e-12 && t.v <= hi + 1e-12).map((t) =>
         h("span", { class: "cbar-tick", style: { bottom: `${(100 * frac(t.v)).toFixed(2)}%` } }, t.label)));
+    // Cells beyond a pinned range are drawn in the end colour; an arrow says so.
+    const clip = (end) => h("span", { class: `cbar-clip ${end}`, title: `some cells are ${end === "hi" ? "above" : "below"} the scale` },
+      end === "hi" ? "▲" : "▼");
+    if (clipped.hi) grad.append(clip("hi"));
+    if (clipped.lo) grad.append(clip("lo"));
     this.el.replaceChildren(h("div", { class: "cbar-title" }, title || "\u00a0"), grad);
   }
 }

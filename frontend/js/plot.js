@@ -2,12 +2,47 @@
  * Plotly access and the house look of every chart. Plotly.js is the vendored UMD build
  * (served from the installed `plotly` Python package); it is read here once, so no other
  * module touches the global.
+ *
+ * Plotly.js is 4.8 MB: evaluating it takes about a second on a cold cache, so the page does
+ * not wait for it. index.html preloads the file (the download overlaps the page's own), and
+ * main.js runs the script once the first view has rendered (loadPlotly). Until then react()
+ * keeps the latest figure per element and draws it as soon as Plotly is there.
  */
+import { SEL } from "./constants.js";
+
+const PLOTLY_URL = "/static/vendor/plotly.min.js";
+let loading = null;
+let markLoaded;
+/** Resolves when Plotly.js has run (started by loadPlotly, never by a plot being drawn). */
+const loaded = new Promise((resolve) => {
+  markLoaded = resolve;
+});
 
 export function plotly() {
   const P = globalThis.Plotly;
-  if (!P) throw new Error("Plotly.js did not load (/static/vendor/plotly.min.js)");
+  if (!P) throw new Error(`Plotly.js did not load (${PLOTLY_URL})`);
   return P;
+}
+
+/** Run Plotly.js (from the preloaded, content-versioned URL); resolves to the Plotly object. */
+export function loadPlotly() {
+  if (globalThis.Plotly) return Promise.resolve(globalThis.Plotly);
+  if (!loading) {
+    loading = new Promise((resolve, reject) => {
+      const script = document.createElement("script");
+      script.src = document.querySelector(SEL.plotlyPreload)?.href || PLOTLY_URL;
+      script.onload = () => {
+        markLoaded();
+        resolve(plotly());
+      };
+      script.onerror = () => {
+        loading = null;
+        reject(new Error(`Plotly.js did not load (${script.src})`));
+      };
+      document.head.append(script);
+    });
+  }
+  return loading;
 }
 
 export const CONFIG = Object.freeze({
@@ -40,9 +75,19 @@ export function theme() {
     info: cssVar("--info"),
     trail: cssVar("--trail"),
     trailEdge: cssVar("--trail-edge"),
+    activeCell: cssVar("--active-cell"),
     font: cssVar("--font"),
     dark: document.documentElement.dataset.theme === "dark",
   };
+}
+
+/** "#rrggbb" (or "#rgb") with an opacity, as Plotly's rgba(); other colours are returned as they are. */
+export function withAlpha(color, alpha) {
+  const m = /^#([0-9a-f]{3}|[0-9a-f]{6})$/i.exec(String(color).trim());
+  if (!m) return color;
+  const hex = m[1].length === 3 ? [...m[1]].map((c) => c + c).join("") : m[1];
+  const [r, g, b] = [0, 2, 4].map((i) => parseInt(hex.slice(i, i + 2), 16));
+  return `rgba(${r},${g},${b},${alpha})`;
 }
 
 /** Series colours that stay distinguishable on both themes. */
@@ -85,23 +130,53 @@ let revision = 0;
 export function react(el, data, layout, config = CONFIG) {
   revision += 1;
   layout = { ...layout, datarevision: revision };
-  if (!el.isConnected) return whenConnected(el, () => plotly().react(el, data, layout, config));
-  return plotly().react(el, data, layout, config);
+  if (globalThis.Plotly && el.isConnected && !waiting.has(el)) return globalThis.Plotly.react(el, data, layout, config);
+  return later(el, [data, layout, config]);
+}
+
+/** Figures waiting for Plotly.js or for their element to be in the page: the latest one wins. */
+const waiting = new Map();
+
+function later(el, args) {
+  const queued = waiting.get(el);
+  if (queued) {
+    queued.args = args;
+    return queued.promise;
+  }
+  const entry = { args, cancelled: false };
+  entry.promise = (globalThis.Plotly ? Promise.resolve() : loaded)
+    .then(() => connected(el))
+    .then((ok) => {
+      if (waiting.get(el) === entry) waiting.delete(el);
+      return ok && !entry.cancelled ? plotly().react(el, ...entry.args) : null;
+    })
+    .catch((err) => {
+      waiting.delete(el);
+      console.error(err);
+      return null;
+    });
+  waiting.set(el, entry);
+  return entry.promise;
 }
 
 /** Plotly sizes a plot from its element, so drawing waits until the element is in the page. */
-function whenConnected(el, draw, frames = 120) {
+function connected(el, frames = 120) {
   return new Promise((resolve) => {
     const tick = (left) => {
-      if (el.isConnected) resolve(draw());
+      if (el.isConnected) resolve(true);
       else if (left > 0) requestAnimationFrame(() => tick(left - 1));
-      else resolve(null);
+      else resolve(false);
     };
-    requestAnimationFrame(() => tick(frames));
+    tick(frames);
   });
 }
 
 export function purge(el) {
+  const queued = waiting.get(el);
+  if (queued) {
+    queued.cancelled = true;
+    waiting.delete(el);
+  }
   try {
     plotly().purge(el);
   } catch {

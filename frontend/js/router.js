@@ -3,7 +3,7 @@
  * A view module exports `title` and `mount(root, ctx)`; mount may return a cleanup function.
  * ctx = {params, query, signal, navigate}; `signal` aborts when the view is left.
  */
-import { SEL } from "./constants.js";
+import { MARK, SEL } from "./constants.js";
 
 export class Router {
   /** @param {{path: RegExp, keys?: string[], view?: object, redirect?: string}[]} routes */
@@ -27,7 +27,7 @@ export class Router {
   intercept(event) {
     if (event.defaultPrevented || event.button !== 0) return;
     if (event.metaKey || event.ctrlKey || event.shiftKey || event.altKey) return;
-    const a = event.target.closest?.("a[href]");
+    const a = event.target.closest?.(SEL.link);
     if (!a || a.target || a.hasAttribute("download")) return;
     const dest = new URL(a.href, window.location.href);
     if (dest.origin !== window.location.origin || dest.pathname.startsWith("/api/") ||
@@ -105,10 +105,11 @@ export class Router {
       console.warn(err);
       this.root.replaceChildren(errorPanel(err));
     }
+    if (!ctx.signal.aborted) performance.mark(MARK.viewMounted, { detail: { path: pathname } });
     // Move focus to the new page's heading after in-app navigation (not on first load,
     // where the browser's own start of the page is right for keyboard and screen readers).
     if (!ctx.signal.aborted && this.rendered++ > 0) {
-      const heading = this.root.querySelector("[data-page-title]") || document.querySelector(SEL.main);
+      const heading = this.root.querySelector(SEL.pageTitle) || document.querySelector(SEL.main);
       heading?.focus({ preventScroll: true });
     }
   }

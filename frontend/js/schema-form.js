@@ -1,9 +1,11 @@
 /**
  * A form generated from an estimator's JSON schema (pydantic's model_json_schema): one
  * labelled control per property, the paper's default filled in, nested sections as fieldsets
- * (optional sections behind a switch). read() returns the config object; controls are named
- * by their dotted path ("config.sensor.lag") so API errors land next to them.
+ * (optional sections behind a switch). read() returns the config object and checks numbers
+ * against the schema's bounds (the API checks again); controls are named by their dotted path
+ * ("config.sensor.lag") so errors land next to them.
  */
+import { SEL } from "./constants.js";
 import { h, parseNumberList, withUnit } from "./dom.js";
 
 /**
@@ -134,6 +136,8 @@ function control(schema, prop, path, start, opts) {
       if (raw === "") return nullable ? null : undefined;
       const v = Number(raw);
       if (!Number.isFinite(v)) throw Object.assign(new Error(`${label}: "${raw}" is not a number`), { field: name });
+      const problem = outOfBounds(inner, v);
+      if (problem) throw Object.assign(new Error(`${label}: must be ${problem}, got ${raw}`), { field: name });
       return v;
     };
   } else {
@@ -141,6 +145,16 @@ function control(schema, prop, path, start, opts) {
     read = () => (input.value === "" ? (nullable ? null : undefined) : input.value);
   }
   return wrap(h("label", { for: id }, label, " ", h("code", { class: "help" }, key)), help, key, { input, read, range: rangeText(inner) });
+}
+
+/** The bound of a JSON-schema number that v breaks, in words (as pydantic says it), or null. */
+function outOfBounds(p, v) {
+  if (p.type === "integer" && !Number.isInteger(v)) return "a whole number";
+  if (p.exclusiveMinimum !== undefined && !(v > p.exclusiveMinimum)) return `greater than ${p.exclusiveMinimum}`;
+  if (p.minimum !== undefined && !(v >= p.minimum)) return `greater than or equal to ${p.minimum}`;
+  if (p.exclusiveMaximum !== undefined && !(v < p.exclusiveMaximum)) return `less than ${p.exclusiveMaximum}`;
+  if (p.maximum !== undefined && !(v <= p.maximum)) return `less than or equal to ${p.maximum}`;
+  return null;
 }
 
 function rangeText(p) {
@@ -182,7 +196,7 @@ function objectControl(schema, inner, path, start, nullable, opts, { name, label
     };
     toggle.addEventListener("change", sync);
     sync();
-    fieldset.querySelector("legend").replaceChildren(h("label", { class: "check", for: id }, toggle, `Use ${label.toLowerCase()}`));
+    fieldset.querySelector(SEL.legend).replaceChildren(h("label", { class: "check", for: id }, toggle, `Use ${label.toLowerCase()}`));
   }
   const read = () => {
     if (toggle && !toggle.checked) return null;

@@ -4,16 +4,21 @@
  */
 import { SERIES_CAP } from "./constants.js";
 
-/** Candidate names per quantity, first match wins. */
-export const SERIES_KEYS = Object.freeze({
-  measured: ["measured", "y_measured", "y", "output"],
-  prediction: ["prediction", "predicted", "y_pred", "y_hat"],
-  residual: ["residual", "innovation", "e"],
-  torqueTrue: ["torque_nm_true", "torque_true"],
-  torqueEst: ["torque_nm", "torque_est"],
-  error: ["torque_nm_error", "error", "torque_error"],
-  lambdaMin: ["pe_lambda_min", "lambda_min"],
+/**
+ * The series names the worker sends (app/runs/worker.py, `_lines`, streamed by `_tick`): the
+ * operating-point channels under their own names, "measured" (a table filter's output column),
+ * the estimator's outputs ("prediction" and "residual" for table filters; "torque_nm", "theta1",
+ * "theta2" and "pe_lambda_min" for torque estimators; an observer's states, e.g. "w_c_kg_s"),
+ * and for every output scored against a simulated truth NAME_true and NAME_error (true − NAME).
+ */
+export const SERIES = Object.freeze({
+  measured: "measured",
+  prediction: "prediction",
+  residual: "residual",
+  lambdaMin: "pe_lambda_min",
 });
+const TRUE_SUFFIX = "_true";
+const ERROR_SUFFIX = "_error";
 
 export class SeriesStore {
   constructor(cap = SERIES_CAP) {
@@ -54,22 +59,27 @@ export class SeriesStore {
   }
 
   /**
-   * The first series present for a quantity in SERIES_KEYS, with its name. Scored outputs
-   * other than torque follow the same pattern (NAME, NAME_true, NAME_error = true − NAME).
+   * A series by quantity: "measured", "prediction", "residual", "lambdaMin" (exact names, see
+   * SERIES), or of the first output scored against a truth: "estimate" (NAME), "truth"
+   * (NAME_true) and "error" (NAME_error). Returns {name, unit, time, values} or null.
    */
   pick(quantity) {
-    for (const key of SERIES_KEYS[quantity] ?? [quantity]) {
-      if (this.data[key]?.values?.length) return { name: key, ...this.data[key] };
-    }
-    const suffix = { torqueTrue: "_true", error: "_error" }[quantity];
-    const scored = Object.keys(this.data).find((k) => k.endsWith("_true") && this.data[k].values?.length);
-    if (suffix && scored) {
-      const key = scored.replace(/_true$/, suffix);
-      if (this.data[key]?.values?.length) return { name: key, ...this.data[key] };
-    }
-    if (quantity === "torqueEst" && scored) {
-      const key = scored.replace(/_true$/, "");
-      if (this.data[key]?.values?.length) return { name: key, ...this.data[key] };
+    const get = (key) => (key && this.data[key]?.values?.length ? { name: key, ...this.data[key] } : null);
+    if (quantity in SERIES) return get(SERIES[quantity]);
+    const scored = this.scored();
+    if (!scored) return null;
+    if (quantity === "estimate") return get(scored);
+    if (quantity === "truth") return get(`${scored}${TRUE_SUFFIX}`);
+    if (quantity === "error") return get(`${scored}${ERROR_SUFFIX}`);
+    return null;
+  }
+
+  /** The first output the worker scored against a truth (NAME with NAME_true and NAME_error). */
+  scored() {
+    for (const key of Object.keys(this.data)) {
+      if (!key.endsWith(TRUE_SUFFIX)) continue;
+      const name = key.slice(0, -TRUE_SUFFIX.length);
+      if (this.data[name] && this.data[`${name}${ERROR_SUFFIX}`]) return name;
     }
     return null;
   }

@@ -1,7 +1,8 @@
 /**
  * The versions timeline of a run: a slider over the stored map versions (plus "live" while
  * the run goes on), a play button that steps through them, the label of the version shown
- * and "save as base map". It fetches versions itself and hands each one to onShow.
+ * and "save as base map". It fetches versions itself and hands each one to onShow; the version
+ * a person picks is reported to onScrub (the view keeps it in its URL, so a reload shows it again).
  */
 import { api, showError } from "./api.js";
 import { fmt, fmtInt, h, icon, ICONS, toast } from "./dom.js";
@@ -18,12 +19,15 @@ export class VersionTimeline {
    * @param {() => void} opts.onLive        back to the live frames
    * @param {(versions: object[]) => void} [opts.onList]
    * @param {() => string} opts.baseMapName name for "save as base map"
+   * @param {number|null} [opts.initialVersion] version id to show first (e.g. from the URL)
+   * @param {(version: object|null) => void} [opts.onScrub] a version was picked (null: back to live/final)
    */
-  constructor({ runId, isLive, onShow, onLive, onList, baseMapName }) {
-    Object.assign(this, { runId, isLive, onShow, onLive, onList, baseMapName });
+  constructor({ runId, isLive, onShow, onLive, onList, baseMapName, initialVersion = null, onScrub = null }) {
+    Object.assign(this, { runId, isLive, onShow, onLive, onList, baseMapName, initialVersion, onScrub });
     this.versions = [];
     this.docs = new Map();
     this.viewing = null;
+    this.showingInitial = false;
     this.playing = 0;
 
     this.slider = h("input", { type: "range", id: "version-slider", min: "0", max: "0", value: "0", step: "1",
@@ -69,7 +73,17 @@ export class VersionTimeline {
     this.ticks.replaceChildren(...this.versions.map((v, k) => h("span", {
       class: v.label ? "labelled" : null, title: v.label ?? "", style: { left: `calc(${(100 * k) / span}% - 1px)` } })));
     this.onList?.(this.versions);
-    if (!this.viewing) {
+    const wanted = this.initialVersion === null ? -1 : this.versions.findIndex((v) => v.id === this.initialVersion);
+    if (wanted >= 0 && !this.viewing) {
+      // A refresh that overlaps this one must not put the final version over it.
+      this.initialVersion = null;
+      this.showingInitial = true;
+      try {
+        await this.scrubTo(wanted);
+      } finally {
+        this.showingInitial = false;
+      }
+    } else if (!this.viewing && !this.showingInitial) {
       this.slider.value = this.slider.max;
       if (!live && n) await this.scrubTo(n - 1, { quiet: true });
       else this.describe();
@@ -123,6 +137,7 @@ export class VersionTimeline {
     this.liveButton.hidden = !live;
     this.describe();
     this.onShow(doc, v, { quiet });
+    if (!quiet) this.onScrub?.(v);
   }
 
   /** Redraw what is shown (e.g. after a theme change). */
@@ -137,6 +152,7 @@ export class VersionTimeline {
     this.liveButton.hidden = true;
     this.slider.value = this.slider.max;
     this.describe();
+    this.onScrub?.(null);
     this.onLive();
   }
 

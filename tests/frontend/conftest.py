@@ -1,8 +1,10 @@
 """Browser tests of the dashboard: Debian's Chromium driven by Playwright (sync API) against a
 real ``mapwise serve`` on a temporary SQLite database.
 
-Every test gets a fresh browser context and fails if the page logged a console error or threw.
-Screenshots go to ``tests/artifacts/`` (git-ignored).
+Every test module gets its own server on a fresh database (no test sees another module's
+runs, datasets or base maps); every test gets a fresh browser context (cold cache, empty
+storage) and fails if the page logged a console error or threw. Screenshots go to
+``tests/artifacts/`` (git-ignored).
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ from playwright.sync_api import (
 )
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
     srv = start_server(tmp_path_factory.mktemp("mapwise-serve"))
     yield srv

@@ -38,7 +38,7 @@ def test_drop_a_csv_see_its_channels_and_map_its_columns(page: Page, api) -> Non
     progress = page.get_by_role("progressbar", name="Upload progress")
     expect(progress).to_have_attribute("aria-valuenow", "100")
     row = page.locator("[data-dataset-list] tbody tr", has_text=name)
-    expect(row).to_have_attribute("aria-selected", "true")
+    expect(row).to_have_attribute("aria-current", "true")
     expect(row).to_contain_text("7,500")
 
     # Channel preview: every channel with its unit and a small plot.
@@ -110,7 +110,7 @@ def test_simulate_a_scenario_then_delete_it(page: Page, api) -> None:
     page.fill("#sim-name", name)
     page.get_by_role("button", name="Simulate").click()
     row = page.locator("[data-dataset-list] tbody tr", has_text=name)
-    expect(row).to_have_attribute("aria-selected", "true")
+    expect(row).to_have_attribute("aria-current", "true")
     expect(page.locator('[data-channel="u2"]')).to_contain_text("[mg/stroke]")
     created = next(
         d

@@ -9,6 +9,7 @@ import uuid
 from playwright.sync_api import Page, expect
 
 from tests.frontend.browser import upload_example, wait_run
+from tests.frontend.conftest import Console
 from tests.frontend.test_compare_versions_view import start_run
 from tests.frontend.test_run_view import RUN_URL, run_form_url
 
@@ -30,8 +31,10 @@ def test_estimator_picker_and_schema_form(page: Page, api) -> None:
     expect(page.locator("#cfg-skf-sensor-lag")).to_be_visible()
     # A second estimator adds a config tab; the tabs switch with the arrow keys.
     page.check("#est-rls")
-    expect(page.get_by_role("tab", name="skf")).to_have_attribute("aria-selected", "true")
-    page.get_by_role("tab", name="skf").focus()
+    expect(page.get_by_role("tab", name="skf", exact=True)).to_have_attribute(
+        "aria-selected", "true"
+    )
+    page.get_by_role("tab", name="skf", exact=True).focus()
     page.keyboard.press("ArrowRight")
     expect(page.get_by_role("tab", name="rls")).to_be_focused()
     expect(page.locator('[data-config="rls"]')).to_be_visible()
@@ -95,3 +98,123 @@ def test_save_a_version_as_base_map_and_start_from_it(page: Page, api) -> None:
     run = api.get(f"/api/runs/{RUN_URL.search(page.url).group(1)}").json()
     assert run["base_map_id"] == base["id"]
     assert wait_run(api, run["id"])["status"] == "succeeded"
+
+
+def post_runs(page: Page) -> list:
+    """POST /api/runs requests the page makes (collected as they happen)."""
+    posts: list = []
+    page.on(
+        "request",
+        lambda r: posts.append(r) if r.method == "POST" and r.url.endswith("/api/runs") else None,
+    )
+    return posts
+
+
+def test_import_a_base_map_needs_a_matching_map(page: Page, api) -> None:
+    dataset = upload_example(api, f"base-check-{uuid.uuid4().hex[:8]}")
+    source = wait_run(api, start_run(api, dataset["id"], "skf")["id"])
+    final = api.get(f"/api/runs/{source['id']}/versions").json()["items"][-1]
+    r = api.post(
+        "/api/base-maps",
+        json={"run_id": source["id"], "version_id": final["id"], "name": "checked map"},
+    )
+    assert r.status_code == 201, r.text
+    base = r.json()
+    posts = post_runs(page)
+    page.goto(run_form_url(dataset["id"]))
+
+    # "Import a base map" with none chosen: an error next to the picker, nothing sent.
+    page.check("#start-base")
+    page.locator("[data-start]").click()
+    error = page.locator(".field:has(#base-map) .field-error")
+    expect(error).to_contain_text("Choose a base map")
+    expect(page.locator("#base-map")).to_have_attribute("aria-invalid", "true")
+    expect(page).to_have_url(re.compile(r"/runs/new\?"))
+
+    # A chosen map whose grid was edited afterwards: refused, nothing sent.
+    page.select_option("#base-map", str(base["id"]))
+    expect(page.locator("#axis-0-bp")).to_have_value(
+        ", ".join(f"{v:g}" for v in base["axes"][0]["breakpoints"])
+    )
+    page.fill("#axis-0-bp", "500, 1500, 2500, 3500, 4500")
+    page.locator("#axis-0-bp").dispatch_event("change")
+    page.locator("[data-start]").click()
+    expect(error).to_contain_text(f"no longer matches base map #{base['id']}")
+    expect(error).to_contain_text("axis 1 (speed_rpm)")
+    assert posts == []
+
+    # Chosen again, its grid comes back and the map's values go with base_map_id.
+    page.select_option("#base-map", "")
+    page.select_option("#base-map", str(base["id"]))
+    with page.expect_request(lambda r: r.method == "POST" and r.url.endswith("/api/runs")) as req:
+        page.locator("[data-start]").click()
+    body = req.value.post_data_json
+    assert body["base_map_id"] == base["id"]
+    assert body["table"]["values"] == base["values"]
+    assert [a["breakpoints"] for a in body["table"]["axes"]] == [
+        a["breakpoints"] for a in base["axes"]
+    ]
+    expect(page).to_have_url(RUN_URL)
+
+
+def test_several_estimators_are_checked_before_any_run_starts(page: Page, api) -> None:
+    dataset = upload_example(api, f"multi-check-{uuid.uuid4().hex[:8]}")
+    posts = post_runs(page)
+    page.goto(run_form_url(dataset["id"]))
+    page.check("#est-kf")
+    page.fill("#cfg-skf-sigma_v", "-1")
+    page.get_by_role("tab", name="kf", exact=True).click()
+    page.fill("#cfg-kf-sigma_v", "0")
+    page.get_by_role("tab", name="skf", exact=True).click()
+    page.locator("[data-start]").click()
+    # Both forms' errors are shown (each next to its field); the first one's tab is open.
+    expect(page.locator(".field:has(#cfg-skf-sigma_v) .field-error")).to_contain_text(
+        "greater than 0"
+    )
+    expect(page.locator('[data-config="skf"]')).to_be_visible()
+    expect(page.get_by_role("tab", name="skf", exact=True)).to_have_attribute("data-invalid", "")
+    expect(page.get_by_role("tab", name="kf", exact=True)).to_have_attribute("data-invalid", "")
+    page.get_by_role("tab", name="kf", exact=True).click()
+    expect(page.locator(".field:has(#cfg-kf-sigma_v) .field-error")).to_contain_text(
+        "greater than 0"
+    )
+    assert posts == [], "a run was posted although a form was invalid"
+    expect(page).to_have_url(re.compile(r"/runs/new\?"))
+
+
+def test_a_refused_run_among_several_reports_the_started_ones(
+    page: Page, api, console: Console
+) -> None:
+    console.allow(r"status of 422")
+    dataset = upload_example(api, f"multi-fail-{uuid.uuid4().hex[:8]}")
+    page.goto(run_form_url(dataset["id"]))
+    page.check("#est-kf")
+    page.check("#est-rls")
+    expect(page.locator("[data-start]")).to_have_text("Start 3 runs")
+    seen: list[str] = []
+
+    def refuse_kf(route) -> None:
+        body = route.request.post_data_json
+        seen.append(body["estimator"])
+        if body["estimator"] == "kf":
+            route.fulfill(
+                status=422,
+                json={"error": {"code": "invalid", "message": "kf refused (test)", "field": None}},
+            )
+        else:
+            route.continue_()
+
+    page.route("**/api/runs", refuse_kf)
+    page.locator("[data-start]").click()
+    expect(page).to_have_url(re.compile(r"/compare\?runs=\d+,\d+$"))
+    ids = [int(i) for i in page.url.split("runs=")[1].split(",")]
+    runs = [api.get(f"/api/runs/{i}").json() for i in ids]
+    assert sorted(r["estimator"] for r in runs) == ["rls", "skf"]
+    assert sorted(seen) == ["kf", "rls", "skf"]  # every run was tried
+    toast = page.locator(".toast.error")
+    for r in runs:
+        expect(toast).to_contain_text(f"#{r['id']} {r['estimator']}")
+    expect(toast).to_contain_text("kf: kf refused (test)")
+    expect(page.locator("[data-metrics-table] tbody tr")).to_have_count(2)
+    for r in runs:
+        wait_run(api, r["id"])

@@ -3,8 +3,8 @@ every control, works from the keyboard; history navigation; page load time."""
 
 from __future__ import annotations
 
-import time
 import uuid
+from pathlib import Path
 
 import pytest
 from playwright.sync_api import Page, expect
@@ -110,13 +110,61 @@ def test_keyboard_only_navigation_and_history(page: Page, finished_run: dict) ->
     expect(menu).to_have_attribute("aria-expanded", "false")
 
 
-def test_page_load_under_one_second(page: Page, finished_run: dict) -> None:
-    page.goto("/datasets")  # warm: the browser's cache revalidates after this
-    expect(page.locator("[data-page-title]")).to_have_text("Datasets")
-    timings = []
-    for _ in range(3):
-        start = time.monotonic()
-        page.goto(f"/runs/{finished_run['id']}")
-        expect(page.locator('[data-plot="map"] .main-svg').first).to_be_attached()
-        timings.append(time.monotonic() - start)
-    assert min(timings) < 1.0, timings
+# The view's own content (what the first render shows) and its first plot, per view.
+READY = {
+    "datasets": ("[data-dataset-list] table", "[data-channel] .main-svg"),
+    "new-run": ("[data-run-form] [data-axes] .axis-row", "[data-run-form] .main-svg"),
+    "run": ("[data-metrics] .metric", '[data-plot="map"] .main-svg'),
+    "compare": ("[data-metrics-table] tbody tr", '[data-plot^="final-"] .main-svg'),
+    "versions": ("[data-diff-stats] dl", '[data-plot="diff"] .main-svg'),
+}
+# Plotly.js (4.8 MB) takes ~1.2 s to evaluate on this 2-core machine without the browser's
+# code cache, so on a cold cache plots come after the first second (the page does not wait
+# for them); warm loads draw them within the second too.
+COLD_PLOT_MS = 3000
+
+# Records when a selector first matches (performance.now(): ms since the navigation
+# started), watched from the moment the document exists.
+WATCH = (Path(__file__).parent / "js" / "watch_first_render.js").read_text()
+
+LOAD_TIMES = (Path(__file__).parent / "js" / "load_times.js").read_text()
+
+
+def test_page_load_under_one_second(browser, server, finished_run: dict, console) -> None:
+    """Every load of every view, the first one on a cold cache included: DOMContentLoaded and
+    the view's first render within a second of the navigation (performance timing)."""
+    loads = []
+    for name, url, _title in views(finished_run):
+        context = browser.new_context(base_url=server.url, viewport={"width": 1400, "height": 900})
+        try:
+            page = context.new_page()
+            page.on("console", console.on_console)
+            page.on("pageerror", console.on_page_error)
+            page.add_init_script(f"({WATCH.strip().rstrip(';')})({list(READY[name])!r})")
+            for attempt in ("cold", "warm", "warm"):
+                if attempt == "cold":
+                    page.goto(url)
+                else:
+                    page.reload()
+                page.wait_for_function(
+                    "() => window.__seen.content !== null && window.__seen.plot !== null",
+                    timeout=15_000,
+                )
+                t = page.evaluate(LOAD_TIMES)
+                loads.append(
+                    (name, attempt, *(round(t[k]) for k in ("dcl", "content", "plot")), t["bytes"])
+                )
+        finally:
+            context.close()
+    print()
+    for n, a, dcl, content, plot, size in loads:
+        print(
+            f"{n:9} {a:5} DOMContentLoaded {dcl:4} ms, view {content:4} ms, plot {plot:4} ms", size
+        )
+    cold = [x for x in loads if x[1] == "cold"]
+    assert all(x[5] > 4_000_000 for x in cold), "a cold load did not fetch its assets (Plotly.js)"
+    slow = [x for x in loads if x[2] >= 1000 or x[3] >= 1000]
+    assert slow == [], f"loads over a second (DOMContentLoaded, first render): {slow}"
+    slow_plots = [x for x in loads if x[4] >= (COLD_PLOT_MS if x[1] == "cold" else 1000)]
+    assert slow_plots == [], f"plots drawn late: {slow_plots}"
+    assert console.unexpected() == [], console.unexpected()

@@ -3,11 +3,13 @@
  * data through several estimators) the final maps side by side on one colour scale, their
  * differences to a reference run, the error signals overlaid, and a metrics table sortable
  * by any column. Refreshes itself while any of the runs is still going.
+ * URL: /compare?runs=1,2&ref=1&sort=output_rmse:desc (reference run of the differences and the
+ * sorted column, so a reload or a pasted link shows the same table).
  */
 import { api, estimators } from "../api.js";
-import { EVT, RUN_ACTIVE } from "../constants.js";
+import { EVT, RUN_ACTIVE, SELECT } from "../constants.js";
 import { card, fill, fmt, fmtDate, fmtDuration, h, icon, ICONS, metricLabel, pageHead, quantile, statusBadge, withUnit } from "../dom.js";
-import { diffNested, MapPlot, sameGrid } from "../map-plot.js";
+import { diffNested, MapPlot, sameGrid, SliceGroup } from "../map-plot.js";
 import { axis, baseLayout, purge, react, SERIES_COLORS } from "../plot.js";
 import { decimate, SeriesStore } from "../series.js";
 
@@ -18,6 +20,21 @@ const REFRESH_MS = 2000;
 const HIGHER_BETTER = new Set(["coverage"]);
 /** Counts, not scores: shown without a "best". */
 const NEUTRAL = new Set(["samples", "accepted"]);
+/** Columns of the metrics table that are not metrics (a metric's URL key is its own name). */
+const PLAIN_COLUMNS = new Set(["id", "estimator", "status"]);
+const SORT_DIRS = { asc: 1, desc: -1 };
+
+/** "output_rmse:desc" → {key: "m:output_rmse", dir: -1}; "id:asc" → {key: "id", dir: 1}. */
+export function parseSort(text) {
+  const m = /^(.+):(asc|desc)$/.exec(text ?? "");
+  if (!m) return { key: null, dir: 1 };
+  return { key: PLAIN_COLUMNS.has(m[1]) ? m[1] : `m:${m[1]}`, dir: SORT_DIRS[m[2]] };
+}
+
+export function formatSort({ key, dir }) {
+  if (!key) return undefined;
+  return `${key.replace(/^m:/, "")}:${dir > 0 ? "asc" : "desc"}`;
+}
 
 export async function mount(root, ctx) {
   const ids = (ctx.query.get("runs") ?? "").split(",").map(Number).filter((n) => Number.isInteger(n) && n > 0);
@@ -42,7 +59,16 @@ export async function mount(root, ctx) {
   if (!ids.length) return () => cleanups.forEach((f) => f());
 
   comparison.append(h("div", { class: "loading" }, "Loading runs…"));
-  const view = { sort: { key: null, dir: 1 }, ref: ids[0], plots: [], timer: 0, last: null };
+  const refQuery = Number(ctx.query.get("ref"));
+  const view = {
+    sort: parseSort(ctx.query.get("sort")),
+    ref: ids.includes(refQuery) ? refQuery : ids[0],
+    plots: [],
+    timer: 0,
+    last: null,
+    slices: new SliceGroup(),
+  };
+  const syncUrl = () => ctx.setQuery({ runs: ids.join(","), ref: view.ref !== ids[0] ? view.ref : undefined, sort: formatSort(view.sort) });
 
   async function load() {
     let body;
@@ -88,8 +114,8 @@ export async function mount(root, ctx) {
       ...keys.map((k) => ({ key: `m:${k}`, label: metricLabel(k), num: true, value: (r) => r.metrics?.[k] ?? null, metric: k })),
     ];
     const sorted = [...runs];
-    if (view.sort.key) {
-      const col = columns.find((c) => c.key === view.sort.key);
+    const col = columns.find((c) => c.key === view.sort.key);
+    if (col) {
       sorted.sort((a, b) => {
         const va = col.value(a);
         const vb = col.value(b);
@@ -108,8 +134,9 @@ export async function mount(root, ctx) {
       return h("th", { scope: "col", class: c.num ? "num" : null, "aria-sort": sort },
         h("button", { type: "button", class: "sort", "data-sort": c.key, onclick: () => {
           view.sort = { key: c.key, dir: view.sort.key === c.key ? -view.sort.dir : 1 };
+          syncUrl();
           render();
-          root.querySelector(`[data-sort="${c.key}"]`)?.focus();
+          root.querySelector(SELECT.sortButton(c.key))?.focus();
         } }, c.label));
     }));
     const rows = sorted.map((r) => h("tr", { dataset: { runId: r.id } }, columns.map((c) => {
@@ -141,7 +168,7 @@ export async function mount(root, ctx) {
     const tiles = mapRuns.map((r) => {
       const el = h("div", { class: "plot small", "data-plot": `final-${r.id}`, role: "img", "aria-label": `Final map of run ${r.id}` });
       const label = r.signals?.y ?? "value";
-      const p = new MapPlot(el, { kind: "value", unit: unitOf(r), label });
+      const p = new MapPlot(el, { kind: "value", unit: unitOf(r), label, slices: view.slices });
       if (range && range[1] > range[0]) p.setRange(range);
       view.plots.push(p);
       pendingDraws.push(() => p.render(r.final_version));
@@ -159,7 +186,9 @@ export async function mount(root, ctx) {
       mapRuns.map((r) => h("option", { value: String(r.id), selected: r.id === view.ref }, `#${r.id} ${r.estimator}`)));
     refSelect.addEventListener("change", () => {
       view.ref = Number(refSelect.value);
+      syncUrl();
       render();
+      root.querySelector(SELECT.id(refSelect.id))?.focus();
     });
     const others = mapRuns.filter((r) => r.id !== ref.id);
     const diffs = others.map((r) => ({ r, ok: sameGrid(ref.final_version.axes, r.final_version.axes) }));
@@ -171,7 +200,7 @@ export async function mount(root, ctx) {
         return card({ title: `#${r.id} − #${ref.id}`, body: h("p", { class: "help" }, "Different grids: the maps cannot be subtracted cell by cell.") });
       }
       const el = h("div", { class: "plot small", "data-plot": `diff-${r.id}`, role: "img", "aria-label": `Run ${r.id} minus run ${ref.id}` });
-      const p = new MapPlot(el, { kind: "diff", unit: unitOf(r), label: r.signals?.y ?? "value" });
+      const p = new MapPlot(el, { kind: "diff", unit: unitOf(r), label: r.signals?.y ?? "value", slices: view.slices });
       view.plots.push(p);
       const frame = { ...r.final_version, values: diffNested(ref.final_version.values, r.final_version.values), trail: null };
       p.setRange([-span, span]);
@@ -201,7 +230,7 @@ export async function mount(root, ctx) {
       data.push({ type: "scatter", mode: "lines", x, y, name: `#${r.id} ${r.estimator}`,
         line: { color: SERIES_COLORS[k % SERIES_COLORS.length], width: 1.3 }, opacity: 0.9,
         hovertemplate: `#${r.id} ${r.estimator}: %{y:.4g} ${err.unit ?? ""}<extra></extra>` });
-      trueTorque = trueTorque ?? store.pick("torqueTrue");
+      trueTorque = trueTorque ?? store.pick("truth");
     });
     if (!data.length) {
       return card({ title: "Errors overlaid", body: h("p", { class: "help" }, "No error series yet.") });
@@ -248,7 +277,7 @@ function pickerCard(runs, selectedIds, datasetName, catalog, ctx) {
           count();
         } });
       const keyMetric = Object.entries(r.metrics ?? {}).find(([k]) => ["ise", "output_rmse", "rmse", "mae"].includes(k));
-      return h("tr", { dataset: { runId: r.id }, "aria-selected": String(selected.has(r.id)) },
+      return h("tr", { dataset: { runId: r.id } },
         h("td", {}, box),
         h("td", { class: "wrap" }, h("a", { href: `/runs/${r.id}` }, `#${r.id}`), " ", h("span", { class: "sub" }, r.name ?? "")),
         h("td", { class: "wrap" }, h("code", { class: "tag accent" }, r.estimator), " ", h("span", { class: "sub" }, est?.title ?? "")),

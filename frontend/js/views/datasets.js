@@ -4,7 +4,7 @@
  * signals an estimator needs before starting a run.
  */
 import { api, clearErrors, estimators, scenarios, showError } from "../api.js";
-import { EVT } from "../constants.js";
+import { EVT, SELECT } from "../constants.js";
 import {
   card, clear, confirmDialog, fmt, fmtBytes, fmtDate, fmtDuration, fmtInt, h, icon, ICONS, pageHead,
   splitHeader, toast, withUnit,
@@ -15,6 +15,8 @@ import { axis, baseLayout, purge, react, STATIC_CONFIG, theme } from "../plot.js
 export const title = "Datasets";
 
 const PREVIEW_POINTS = 400;
+/** The controls of the column mapping (signal and axis pickers). */
+const CONTROL = "select";
 
 export async function mount(root, ctx) {
   const state = { datasets: [], selected: Number(ctx.query.get("id")) || null, plots: [] };
@@ -53,7 +55,7 @@ export async function mount(root, ctx) {
       return;
     }
     const rows = state.datasets.map((d) =>
-      h("tr", { "aria-selected": String(d.id === state.selected), dataset: { datasetId: d.id } },
+      h("tr", { "aria-current": d.id === state.selected ? "true" : null, dataset: { datasetId: d.id } },
         h("td", { class: "wrap" },
           h("button", { class: "linklike", type: "button", "data-select-dataset": d.id,
             "aria-label": `Preview dataset ${d.name}`, onclick: () => select(d.id) }, d.name),
@@ -270,7 +272,7 @@ function uploadCard(ctx, onCreated) {
 
 /** A problem with one CSV column is shown on that column's row; others next to the file or form. */
 function showUploadError(form, err) {
-  const row = err?.field ? form.querySelector(`[data-column="${CSS.escape(err.field)}"]`) : null;
+  const row = err?.field ? form.querySelector(SELECT.dataColumn(err.field)) : null;
   if (row) return showError(form, { ...err, message: err.message, name: err.name, field: `column:${err.field}` });
   return showError(form, err);
 }
@@ -403,6 +405,8 @@ async function mappingCard(ctx, dataset) {
         h("div", { class: "field" }, h("label", { for: "map-ax0" }, "Table axis 1 (x)"), channelSelect("map-ax0", "axis.0", guess.axes[0])),
         h("div", { class: "field" }, h("label", { for: "map-ax1" }, "Table axis 2 (y)"),
           channelSelect("map-ax1", "axis.1", guess.axes[1], { optional: true })),
+        h("div", { class: "field" }, h("label", { for: "map-ax2" }, "Table axis 3 (slices)"),
+          channelSelect("map-ax2", "axis.2", null, { optional: true })),
       );
     } else {
       const taken = new Set();
@@ -423,7 +427,7 @@ async function mappingCard(ctx, dataset) {
   const update = () => {
     const signals = {};
     const axes = [];
-    for (const sel of roles.querySelectorAll("select")) {
+    for (const sel of roles.querySelectorAll(CONTROL)) {
       if (sel.name.startsWith("signals.") && sel.value) signals[sel.name.slice(8)] = sel.value;
       if (sel.name.startsWith("axis.") && sel.value) axes.push(sel.value);
     }

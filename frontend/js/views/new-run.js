@@ -1,12 +1,15 @@
 /**
  * New run: dataset, one or several estimators (with description and paper), the columns that
  * feed their signals, the table grid, a config form generated from each estimator's schema,
- * and run options (pace, version cadence, gates). Starting several estimators at once opens
- * the comparison of the new runs.
+ * and run options (pace, version cadence, gates). Starting several estimators at once checks
+ * every form first, then opens the comparison of the new runs (of those the API accepted, when
+ * it refuses one). Dataset, estimators, signals and axes live in the URL; the rest of the form
+ * (breakpoints, start map, config values, pace, cadence, gates) is kept as a draft in
+ * sessionStorage, so a reload shows the form as it was.
  */
 import { api, clearErrors, estimators, scenarios, showError } from "../api.js";
-import { PACES } from "../constants.js";
-import { card, fmt, fmtDuration, fmtInt, h, icon, ICONS, pageHead, toast, withUnit } from "../dom.js";
+import { PACES, SEL, SELECT, STORAGE } from "../constants.js";
+import { card, debounce, fmt, fmtDuration, fmtInt, h, icon, ICONS, pageHead, toast, withUnit } from "../dom.js";
 import { gridEditor } from "../grid-editor.js";
 import { decodeSignals, encodeSignals, guessColumn, guessTable, KIND_TITLES, needsTable, rolesOf } from "../mapping.js";
 import { schemaForm } from "../schema-form.js";
@@ -15,6 +18,38 @@ export const title = "New run";
 
 /** Config properties filled from the signal mapping and the grid editor, not the form. */
 const FROM_ELSEWHERE = new Set(["axes", "output", "output_unit", "locked"]);
+/** Controls whose values a draft keeps (file inputs cannot be restored). */
+const DRAFT_CONTROLS = "input:not([type=file]), select, textarea";
+const DRAFT_SAVE_MS = 120;
+
+function loadDraft() {
+  try {
+    return JSON.parse(sessionStorage.getItem(STORAGE.newRunDraft) ?? "null");
+  } catch {
+    return null;
+  }
+}
+
+/** {id: value | checked} of the controls in `container`. */
+function controlValues(container) {
+  const out = {};
+  for (const el of container.querySelectorAll(DRAFT_CONTROLS)) {
+    if (!el.id) continue;
+    out[el.id] = el.type === "checkbox" || el.type === "radio" ? el.checked : el.value;
+  }
+  return out;
+}
+
+/** Put saved control values back; a "change" event lets dependent parts (switches) follow. */
+function restoreControls(container, values) {
+  for (const [id, value] of Object.entries(values ?? {})) {
+    const el = container.querySelector(SELECT.id(id));
+    if (!el) continue;
+    if (el.type === "checkbox" || el.type === "radio") el.checked = Boolean(value);
+    else el.value = String(value);
+    el.dispatchEvent(new Event("change"));
+  }
+}
 
 export async function mount(root, ctx) {
   const [catalog, datasets, baseMaps, scenarioList] = await Promise.all([
@@ -35,6 +70,9 @@ export async function mount(root, ctx) {
     grid: null,
     tab: null,
   };
+  // The draft of this form from before a reload (same dataset only); each part is used once.
+  const saved = loadDraft();
+  const draft = saved && saved.datasetId === state.datasetId ? saved : null;
 
   root.append(pageHead({ title: "New run", sub: "Pick data and estimators, set up the table, and watch the map adapt live." }));
   if (!datasets.length) {
@@ -52,6 +90,7 @@ export async function mount(root, ctx) {
   const optionsHost = h("div");
   const submit = h("button", { type: "submit", class: "primary", "data-start": "" }, icon(ICONS.play), "Start run");
   const formError = h("div", { class: "banner error", "data-form-error": "", hidden: true });
+  const tableSection = h("div", { "data-table-section": "" });
 
   const section = (n, label, body, id) =>
     h("section", { class: "card", "aria-labelledby": id, "data-section": id },
@@ -63,12 +102,13 @@ export async function mount(root, ctx) {
       section(1, "Data", datasetHost, "sec-data"),
       section(2, "Estimators", estHost, "sec-est"),
       section(3, "Signals", signalsHost, "sec-signals"),
-      h("div", { "data-table-section": "" }, section(4, "Table grid", tableHost, "sec-table")),
+      tableSection,
       section(5, "Configuration", configHost, "sec-config"),
       section(6, "Run options", optionsHost, "sec-options"),
       formError,
       h("div", { class: "form-actions" }, h("a", { class: "button", href: "/datasets" }, "Cancel"), submit)),
   );
+  tableSection.append(section(4, "Table grid", tableHost, "sec-table"));
   root.append(form);
 
   const selectedEstimators = () => catalog.filter((e) => state.chosen.has(e.name));
@@ -164,13 +204,16 @@ export async function mount(root, ctx) {
   /* ---------- 4. table ---------- */
   function renderTable() {
     const show = selectedEstimators().some(needsTable);
-    form.querySelector("[data-table-section]").hidden = !show;
+    tableSection.hidden = !show;
     if (!show) return;
     const chans = channels();
     const wanted = state.axes.length ? state.axes : guessTable(chans).axes;
     if (state.grid && state.grid.datasetId === state.datasetId) return state.grid.redraw();
     state.grid?.destroy();
-    const g = gridEditor({ channels: chans, preview: state.preview, axes: wanted, baseMaps });
+    const draftGrid = draft?.grid && sameNames(draft.grid.axes?.map((a) => a.name), wanted) ? draft.grid : null;
+    if (draft) draft.grid = null;
+    const g = gridEditor({ channels: chans, preview: state.preview, axes: wanted, baseMaps, saved: draftGrid,
+      onChange: () => { syncUrl(); saveDraft(); } });
     g.datasetId = state.datasetId;
     state.grid = g;
     tableHost.replaceChildren(g.el);
@@ -190,6 +233,10 @@ export async function mount(root, ctx) {
         f.panel = h("div", { role: "tabpanel", id: `panel-${e.name}`, "aria-labelledby": `tab-${e.name}`, "data-config": e.name },
           h("p", { class: "help", style: { marginTop: 0 } }, `${e.title}. Defaults follow ${e.paper ? shortPaper(e.paper) : "the paper"}.`),
           f.el);
+        if (draft?.config?.[e.name]) {
+          restoreControls(f.panel, draft.config[e.name]);
+          delete draft.config[e.name];
+        }
         keep.set(e.name, f);
       }
     }
@@ -215,13 +262,13 @@ export async function mount(root, ctx) {
 
   function selectTab(name, focus = false) {
     state.tab = name;
-    for (const b of configHost.querySelectorAll("[role=tab]")) {
+    for (const b of configHost.querySelectorAll(SEL.tab)) {
       const on = b.id === `tab-${name}`;
       b.setAttribute("aria-selected", String(on));
       b.tabIndex = on ? 0 : -1;
       if (on && focus) b.focus();
     }
-    for (const p of configHost.querySelectorAll("[role=tabpanel]")) p.hidden = p.dataset.config !== name;
+    for (const p of configHost.querySelectorAll(SEL.tabPanel)) p.hidden = p.dataset.config !== name;
   }
 
   /* ---------- 6. options ---------- */
@@ -239,6 +286,17 @@ export async function mount(root, ctx) {
   cadence.addEventListener("change", () => { cadenceN.hidden = !cadence.value; });
   const gatesHost = h("div", { class: "gates-editor" });
   const gates = [];
+  if (draft) {
+    runName.value = draft.options?.["run-name"] ?? "";
+    for (const [el, id] of [[pace, "run-pace"], [paceCustom, "run-pace-custom"], [cadence, "run-cadence"], [cadenceN, "run-cadence-n"]]) {
+      const v = draft.options?.[id];
+      if (typeof v === "string" && v !== "") el.value = v;
+    }
+    paceCustom.hidden = pace.value !== "custom";
+    cadenceN.hidden = !cadence.value;
+    for (const g of draft.gates ?? []) if (g && typeof g === "object") gates.push({ ...g });
+    if (draft.tab) state.tab = draft.tab;
+  }
 
   function renderGates() {
     const chans = channels();
@@ -293,18 +351,36 @@ export async function mount(root, ctx) {
     const query = { dataset: state.datasetId, estimator: [...state.chosen].join(",") };
     const sig = encodeSignals(state.signals);
     if (sig) query.signals = sig;
-    const axes = state.grid ? safeAxes(state.grid) : state.axes;
+    const axes = state.grid ? state.grid.snapshot().axes.map((a) => a.name) : state.axes;
     if (axes.length) query.axes = axes.join(",");
     ctx.setQuery(query);
   }
 
-  function safeAxes(grid) {
+  /* ---------- draft (sessionStorage) ---------- */
+  function draftNow() {
+    const config = {};
+    for (const [name, f] of state.forms) config[name] = controlValues(f.panel);
+    return {
+      datasetId: state.datasetId,
+      grid: state.grid?.snapshot() ?? null,
+      config,
+      options: controlValues(optionsHost),
+      gates: gates.map((g) => ({ ...g })),
+      tab: state.tab,
+    };
+  }
+
+  function saveDraft() {
+    if (ctx.signal.aborted) return;
     try {
-      return grid.read().table.axes.map((a) => a.name);
+      sessionStorage.setItem(STORAGE.newRunDraft, JSON.stringify(draftNow()));
     } catch {
-      return [];
+      /* storage full or disabled: the form simply starts afresh after a reload */
     }
   }
+  const saveSoon = debounce(saveDraft, DRAFT_SAVE_MS);
+  for (const type of ["input", "change", "click"]) form.addEventListener(type, saveSoon);
+  window.addEventListener("pagehide", saveDraft);
 
   /* ---------- submit ---------- */
   function serviceOptions() {
@@ -344,56 +420,96 @@ export async function mount(root, ctx) {
   form.addEventListener("submit", async (e) => {
     e.preventDefault();
     clearErrors(form);
+    for (const b of configHost.querySelectorAll(SEL.tab)) b.removeAttribute("data-invalid");
     const ests = selectedEstimators();
     if (!ests.length) {
       showError(form, { message: "Pick at least one estimator.", field: "estimator" });
       return;
     }
-    let shared;
-    const bodies = [];
+    // Check every form before the first POST: all problems at once, each next to its field.
+    const problems = [];
+    let shared = null;
     try {
       shared = { options: serviceOptions(), grid: ests.some(needsTable) ? state.grid?.read() : null };
-      for (const est of ests) {
-        state.tab = est.name;
-        bodies.push(bodyFor(est, shared));
-      }
     } catch (err) {
-      reportError(err, state.tab);
+      problems.push({ err, estimator: null });
+    }
+    const bodies = [];
+    for (const est of ests) {
+      try {
+        if (shared) bodies.push(bodyFor(est, shared));
+        else state.forms.get(est.name).read();
+      } catch (err) {
+        problems.push({ err, estimator: est.name });
+      }
+    }
+    if (problems.length) {
+      reportErrors(problems);
       return;
     }
     submit.disabled = true;
     const created = [];
-    try {
-      for (const body of bodies) {
-        try {
-          created.push(await api.post("/api/runs", body));
-        } catch (err) {
-          reportError(err, body.estimator);
-          throw err;
-        }
+    const failed = [];
+    for (const body of bodies) {
+      try {
+        created.push({ run: await api.post("/api/runs", body), estimator: body.estimator });
+      } catch (err) {
+        if (err.name === "AbortError") return;
+        failed.push({ err, estimator: body.estimator });
       }
-    } catch {
-      if (created.length) toast(`Started ${created.length} run(s) before the error.`);
-      submit.disabled = false;
-      return;
     }
     submit.disabled = false;
-    if (created.length === 1) ctx.navigate(`/runs/${created[0].id}`);
-    else ctx.navigate(`/compare?runs=${created.map((r) => r.id).join(",")}`);
-  });
-
-  function reportError(err, estimatorName) {
-    const field = err.field ?? "";
-    if (field.startsWith("config") && !/^config\.(pace|version_every|gates)/.test(field) && state.forms.has(estimatorName)) {
-      selectTab(estimatorName);
-      showError(state.forms.get(estimatorName).panel, err);
+    if (!created.length) {
+      reportErrors(failed);
       return;
     }
-    showError(form, estimatorName && selectedEstimators().length > 1 ? Object.assign(err, { message: `${estimatorName}: ${err.message}` }) : err);
+    sessionStorage.removeItem(STORAGE.newRunDraft);
+    window.removeEventListener("pagehide", saveDraft);
+    if (failed.length) {
+      // Some runs exist already: say which, and show those; the refusals travel in a toast.
+      const started = created.map((c) => `#${c.run.id} ${c.estimator}`).join(", ");
+      const refused = failed.map((f) => `${f.estimator}: ${f.err.message}`).join("; ");
+      toast(`Started ${started}. Not started — ${refused}`, { error: true, ms: 15000 });
+      ctx.navigate(`/compare?runs=${created.map((c) => c.run.id).join(",")}`);
+      return;
+    }
+    if (created.length === 1) ctx.navigate(`/runs/${created[0].run.id}`);
+    else ctx.navigate(`/compare?runs=${created.map((c) => c.run.id).join(",")}`);
+  });
+
+  /**
+   * Show every problem next to its field. Estimators with a config problem get their tab marked;
+   * the open tab stays open if it has one, else the first such tab opens.
+   */
+  function reportErrors(problems) {
+    const several = selectedEstimators().length > 1;
+    let firstTab = null;
+    for (const { err, estimator } of problems) {
+      const field = err.field ?? "";
+      const inConfig = field.startsWith("config") && !/^config\.(pace|version_every|gates)/.test(field);
+      if (inConfig && estimator && state.forms.has(estimator)) {
+        if (firstTab === null || estimator === state.tab) firstTab = estimator;
+        configHost.querySelector(SELECT.id(`tab-${estimator}`))?.setAttribute("data-invalid", "");
+        showError(state.forms.get(estimator).panel, err);
+      } else {
+        showError(form, estimator && several ? Object.assign(err, { message: `${estimator}: ${err.message}` }) : err);
+      }
+    }
+    if (firstTab) {
+      selectTab(firstTab);
+      state.forms.get(firstTab).panel.querySelector(SEL.invalid)?.focus();
+    }
   }
 
   await loadDataset();
-  return () => state.grid?.destroy();
+  return () => {
+    window.removeEventListener("pagehide", saveDraft);
+    state.grid?.destroy();
+  };
+}
+
+function sameNames(a, b) {
+  return Array.isArray(a) && a.length === b.length && a.every((x, i) => x === b[i]);
 }
 
 /** "Guardiola, Pla, … (2014), Control Eng. Practice — the SKF paper" → "Guardiola et al. (2014) · the SKF paper". */

@@ -7,13 +7,13 @@
  * with Plotly.react (traces updated in place).
  */
 import { api, estimators, showError } from "../api.js";
-import { EVT, FRAME_INTERVAL_MS, RUN_ACTIVE, RUN_DONE, STORAGE, TRAIL_POINTS } from "../constants.js";
+import { EVT, FRAME_INTERVAL_MS, RUN_ACTIVE, RUN_DONE, SEL, STORAGE, TRAIL_POINTS } from "../constants.js";
 import {
-  card, fmt, fmtDate, fmtDuration, fmtInt, h, icon, ICONS, metricLabel, pageHead, quantile, statusBadge, toast, withUnit,
+  card, flatten, fmt, fmtDate, fmtDuration, fmtInt, h, icon, ICONS, metricLabel, pageHead, quantile, statusBadge, toast, withUnit,
 } from "../dom.js";
 import { exportMenu } from "../export-menu.js";
 import { LiveStream } from "../live.js";
-import { MapPlot } from "../map-plot.js";
+import { MapPlot, niceRange, SliceGroup } from "../map-plot.js";
 import { axis, baseLayout, hasWebGL, purge, react, SERIES_COLORS, theme } from "../plot.js";
 import { decimate, SeriesStore } from "../series.js";
 import { VersionTimeline } from "../timeline.js";
@@ -21,6 +21,11 @@ import { VersionTimeline } from "../timeline.js";
 export const title = "Run";
 
 const SERIES_INTERVAL_MS = 250;
+/** requestAnimationFrame ticks every ~16.7 ms: a frame due in under this much is drawn now, so
+ * 20 frames/s are not rounded down to 15 by a tick that lands a hair early. */
+const FRAME_SLACK_MS = 6;
+/** Points of the dataset preview the colour range is taken from (min/max decimation keeps the peaks). */
+const RANGE_PREVIEW_POINTS = 2000;
 const VARIANCE_INTERVAL_MS = 100;
 const META_REFRESH_MS = 2000;
 const META_INTERVAL_MS = 400;
@@ -33,10 +38,19 @@ export async function mount(root, ctx) {
   const id = Number(ctx.params.id);
   const [run, catalog] = await Promise.all([api.get(`/api/runs/${id}`, { signal: ctx.signal }), estimators()]);
   const est = catalog.find((e) => e.name === run.estimator) ?? { name: run.estimator, title: run.estimator, kind: "" };
-  const dataset = await api.get(`/api/datasets/${run.dataset_id}`, { signal: ctx.signal }).catch(() => null);
+  const producesMap = run.produces_map ?? est.produces_map ?? true;
+  // The colour scale of the run is fixed before the first frame is drawn: the measured
+  // output's range (and the starting map's), the same on every load of the page.
+  const wantsPreview = producesMap && Boolean(run.signals?.y);
+  const [dataset, preview] = await Promise.all([
+    api.get(`/api/datasets/${run.dataset_id}`, { signal: ctx.signal }).catch(() => null),
+    wantsPreview
+      ? api.get(`/api/datasets/${run.dataset_id}/preview`, { query: { points: RANGE_PREVIEW_POINTS }, signal: ctx.signal })
+        .catch(() => null)
+      : null,
+  ]);
   window.dispatchEvent(new CustomEvent(EVT.currentRun, { detail: run }));
 
-  const producesMap = run.produces_map ?? est.produces_map ?? true;
   const outputName = run.signals?.y ?? run.config?.output ?? "value";
   const outputUnit = dataset?.channels?.find((c) => c.name === outputName)?.unit ?? run.config?.output_unit ?? "";
   const s = {
@@ -61,7 +75,7 @@ export async function mount(root, ctx) {
     dirtyMeta: false,
     lastMeta: 0,
     rate: { t: performance.now(), sample: 0, value: null },
-    connection: "connecting",
+    connection: { state: "connecting", detail: {} },
   };
 
   /* ---------- skeleton ---------- */
@@ -101,8 +115,10 @@ export async function mount(root, ctx) {
     "aria-label": `Map ${withUnit(outputName, outputUnit)} over ${(s.axes ?? []).map((a) => a.name).join(" and ")}` });
   const varEl = h("div", { class: "plot map", "data-plot": "variance", role: "img", "aria-label": "Cell variances, log colour scale" });
   // Live maps skip the cell gaps: cheaper frames (see MapPlot.drawBar for the colour bar).
-  const mapPlot = new MapPlot(mapEl, { kind: "value", unit: outputUnit, label: outputName, mode: mapMode, gaps: false });
-  const varPlot = new MapPlot(varEl, { kind: "variance", unit: outputUnit, label: outputName, gaps: false });
+  const slices = new SliceGroup();
+  const mapPlot = new MapPlot(mapEl, { kind: "value", unit: outputUnit, label: outputName, mode: mapMode, gaps: false, slices });
+  const varPlot = new MapPlot(varEl, { kind: "variance", unit: outputUnit, label: outputName, gaps: false, slices });
+  mapPlot.setRange(runRange(run, preview));
   const modeButtons = ["heatmap", "surface"].map((m) =>
     h("button", { type: "button", "aria-pressed": String(m === mapMode), "data-map-mode": m, disabled: m === "surface" && !hasWebGL(),
       title: m === "surface" && !hasWebGL() ? "3-D needs WebGL, which this browser lacks" : null,
@@ -115,6 +131,8 @@ export async function mount(root, ctx) {
   /* ---------- timeline ---------- */
   const timeline = new VersionTimeline({
     runId: id,
+    initialVersion: Number(ctx.query.get("version")) || null,
+    onScrub: (version) => ctx.setQuery({ version: version?.id }),
     isLive: () => RUN_ACTIVE.has(s.run.status),
     onShow: (doc, _version, { quiet }) => drawMaps({ axes: doc.axes ?? s.axes, values: doc.values, variances: doc.variances,
       visits: doc.visits, trail: quiet ? s.trail : null, activeCell: null }),
@@ -140,7 +158,7 @@ export async function mount(root, ctx) {
   const seriesCard = card({ title: isTorque ? "Torque: estimated vs true" : "Measured vs predicted",
     hint: isTorque ? "error (true − estimated) below" : "residual below", body: seriesEl, bodyCls: "tight" });
   const setSeriesTitle = (text, hint) => {
-    const h2 = seriesCard.querySelector("h2");
+    const h2 = seriesCard.querySelector(SEL.cardTitle);
     if (h2.firstChild.textContent !== text) h2.replaceChildren(text, h("span", { class: "hint" }, ` · ${hint}`));
   };
   const varCard = card({ title: "Variance", hint: "diag P, log colour scale", body: varEl, bodyCls: "tight" });
@@ -179,7 +197,6 @@ export async function mount(root, ctx) {
     s.sample = msg.sample ?? s.sample;
     s.nSamples = msg.n_samples ?? s.nSamples;
     s.progress = msg.run?.progress ?? (s.nSamples ? s.sample / s.nSamples : s.progress);
-    seedRange();
     s.dirtyMap = true;
     s.dirtySeries = true;
     renderMeta();
@@ -226,29 +243,12 @@ export async function mount(root, ctx) {
     }
   }
 
-  /** Fix the colour range of the run from the measured output's spread (then only widened). */
-  function seedRange() {
-    if (mapPlot.range || !s.values) return;
-    const y = ctxPreviewY;
-    if (y) {
-      const lo = quantile(y, 0.01);
-      const hi = quantile(y, 0.99);
-      if (lo !== null && hi > lo) mapPlot.range = [lo, hi];
-    }
-  }
-  let ctxPreviewY = null;
-  if (producesMap && dataset && run.signals?.y) {
-    api.get(`/api/datasets/${dataset.id}/preview`, { query: { points: 2000 }, signal: ctx.signal })
-      .then((pv) => { ctxPreviewY = pv.channels?.[run.signals.y]?.values?.filter((v) => v !== null) ?? null; })
-      .catch(() => {});
-  }
-
   /* ---------- rendering ---------- */
   let raf = 0;
   const loop = (now) => {
     raf = requestAnimationFrame(loop);
     // One plot per animation frame at most: a long series redraw never delays a map frame.
-    if (s.dirtyMap && now - s.lastMap >= FRAME_INTERVAL_MS) {
+    if (s.dirtyMap && now - s.lastMap >= FRAME_INTERVAL_MS - FRAME_SLACK_MS) {
       s.lastMap = now;
       s.dirtyMap = false;
       const withVariance = now - s.lastVariance >= VARIANCE_INTERVAL_MS;
@@ -297,7 +297,7 @@ export async function mount(root, ctx) {
         varPlot.kind = "visits";
         varPlot.range = null;
         varEl.setAttribute("aria-label", "Visits per cell");
-        const h2 = varCard.querySelector("h2");
+        const h2 = varCard.querySelector(SEL.cardTitle);
         h2.replaceChildren("Visits", h("span", { class: "hint" }, " · samples weighted onto each cell (no covariance)"));
       }
       varPlot.render(frame);
@@ -311,10 +311,10 @@ export async function mount(root, ctx) {
     let bottom;
     // Estimators scored against a simulated truth (torque, the observers' compressor flow)
     // show estimate vs truth; table filters show measured vs predicted output.
-    const truthMode = isTorque || (est.kind !== "table-filter" && s.series.has("torqueTrue"));
+    const truthMode = isTorque || (est.kind !== "table-filter" && s.series.has("truth"));
     if (truthMode) {
-      const tt = s.series.pick("torqueTrue");
-      const te = s.series.pick("torqueEst");
+      const tt = s.series.pick("truth");
+      const te = s.series.pick("estimate");
       const er = s.series.pick("error");
       const what = isTorque ? "torque" : (te ?? tt)?.name.replace(/_true$/, "") ?? "output";
       if (te) data.push(line(te, `estimated ${what}`, SERIES_COLORS[0], { width: 1.2 }));
@@ -373,6 +373,7 @@ export async function mount(root, ctx) {
 
   function renderMeta() {
     badge.replaceChildren(statusBadge(s.run.status));
+    showConnection();
     cancelBtn.hidden = !RUN_ACTIVE.has(s.run.status);
     resumeBtn.hidden = !["interrupted", "cancelled"].includes(s.run.status);
     errorBanner.hidden = !s.run.error;
@@ -388,7 +389,7 @@ export async function mount(root, ctx) {
       h("div", { class: "k" }, metricLabel(k)),
       h("div", { class: "v" }, v, unit ? h("span", { class: "u" }, unit) : null),
       detail ? h("div", { class: "d" }, detail) : null);
-    const torqueUnit = s.series.pick("torqueEst")?.unit ?? "N·m";
+    const torqueUnit = s.series.pick("estimate")?.unit || "N·m";
     const unitOf = (k) => {
       if (isTorque && (k === "mae" || k === "sd")) return torqueUnit;
       if (k === "coverage") return "";
@@ -454,6 +455,7 @@ export async function mount(root, ctx) {
       if (!body?.series || !Object.keys(body.series).length) return;
       s.series.reset(body.series, body.time);
       s.dirtySeries = true;
+      s.dirtyMeta = true; // the metric cards take their units from the series
     } catch {
       /* keep the live series */
     }
@@ -472,6 +474,17 @@ export async function mount(root, ctx) {
   }
 
   /* ---------- stream ---------- */
+  /** The live indicator: "● live" while a running run streams, the reconnect countdown, … */
+  function showConnection() {
+    const { state, detail } = s.connection;
+    conn.dataset.state = state;
+    const done = RUN_DONE.has(s.run.status);
+    conn.textContent = state === "open" ? (done ? "" : "● live") : state === "reconnecting"
+      ? `reconnecting in ${Math.round(detail.inMs / 100) / 10} s…` : state === "connecting" ? "connecting…" : "";
+    conn.style.color = state === "open" ? "var(--ok)" : "var(--text-3)";
+    if (state === "closed" && detail.reason) conn.textContent = `stream closed: ${detail.reason}`;
+  }
+
   let stream = null;
   function restartStream() {
     stream?.close();
@@ -480,12 +493,8 @@ export async function mount(root, ctx) {
       onDelta: applyDelta,
       onStatus: applyStatus,
       onConnection: (state, detail) => {
-        s.connection = state;
-        const done = RUN_DONE.has(s.run.status);
-        conn.textContent = state === "open" ? (done ? "" : "● live") : state === "reconnecting"
-          ? `reconnecting in ${Math.round(detail.inMs / 100) / 10} s…` : state === "connecting" ? "connecting…" : "";
-        conn.style.color = state === "open" ? "var(--ok)" : "var(--text-3)";
-        if (state === "closed" && detail.reason) conn.textContent = `stream closed: ${detail.reason}`;
+        s.connection = { state, detail };
+        showConnection();
       },
     }).start();
   }
@@ -519,6 +528,25 @@ export async function mount(root, ctx) {
     purge(seriesEl);
     purge(peEl);
   };
+}
+
+/**
+ * The run's colour range: the measured output's span over the whole log together with the
+ * starting map (θ0, typed values or a base map), on nice bounds; null when there is no
+ * measured output (the plot then seeds from its first frame). Cells the filter extrapolates
+ * beyond it saturate at the ends of the scale rather than rescale every frame.
+ */
+function runRange(run, preview) {
+  const values = preview?.channels?.[run.signals?.y]?.values ?? [];
+  const start = flatten([run.estimator_config?.theta0 ?? run.config?.theta0 ?? []]);
+  let lo = Infinity;
+  let hi = -Infinity;
+  for (const v of [...values, ...start]) {
+    if (typeof v !== "number" || !Number.isFinite(v)) continue;
+    if (v < lo) lo = v;
+    if (v > hi) hi = v;
+  }
+  return values.length && hi >= lo ? niceRange(lo, hi) : null;
 }
 
 function line(series, name, color, { width = 1.5, dash = "solid" } = {}) {

@@ -6,13 +6,16 @@
 import { api, clearErrors, showError } from "../api.js";
 import { EVT, EXPORT_FORMATS } from "../constants.js";
 import { card, fmt, fmtInt, h, icon, ICONS, pageHead, toast } from "../dom.js";
-import { diffNested, MapPlot, sameGrid } from "../map-plot.js";
+import { diffNested, MapPlot, sameGrid, SliceGroup } from "../map-plot.js";
 
 export const title = "Versions";
 
 export async function mount(root, ctx) {
-  const runs = (await api.all("/api/runs", { signal: ctx.signal })).filter((r) => r.produces_map !== false);
-  const datasets = await api.all("/api/datasets", { signal: ctx.signal }).catch(() => []);
+  const [allRuns, datasets] = await Promise.all([
+    api.all("/api/runs", { signal: ctx.signal }),
+    api.all("/api/datasets", { signal: ctx.signal }).catch(() => []),
+  ]);
+  const runs = allRuns.filter((r) => r.produces_map !== false);
   root.append(pageHead({ title: "Versions", sub: "Compare two map versions, label the one you trust, and export it." }));
   if (!runs.length) {
     root.append(card({ title: "No maps yet", body: h("p", {}, "Versions appear as map runs progress. ", h("a", { href: "/runs/new" }, "Start a run →")) }));
@@ -30,6 +33,8 @@ export async function mount(root, ctx) {
 
   const sides = { a: { ...a, versions: [], doc: null }, b: { ...b, versions: [], doc: null } };
   const plots = {};
+  // A, B and their difference show the same slice of a 3-D table.
+  const slices = new SliceGroup();
   const unitOf = (runId) => {
     const r = runs.find((x) => x.id === runId);
     const ds = datasets.find((d) => d.id === r?.dataset_id);
@@ -40,7 +45,7 @@ export async function mount(root, ctx) {
   const sideCards = {};
   for (const key of ["a", "b"]) sideCards[key] = sideCard(key);
   const diffEl = h("div", { class: "plot map", "data-plot": "diff", role: "img", "aria-label": "Difference B minus A" });
-  plots.diff = new MapPlot(diffEl, { kind: "diff" });
+  plots.diff = new MapPlot(diffEl, { kind: "diff", slices });
   root.append(
     h("div", { class: "stack" },
       h("div", { class: "grid cols-2" }, sideCards.a.el, sideCards.b.el),
@@ -104,7 +109,7 @@ export async function mount(root, ctx) {
       await loadVersion(key);
     });
     const { unit, label } = unitOf(side.run);
-    plots[key] = new MapPlot(plotEl, { kind: "value", unit, label });
+    plots[key] = new MapPlot(plotEl, { kind: "value", unit, label, slices });
     const el = card({
       title: key === "a" ? "Version A" : "Version B",
       cls: `version-side ${key}`,
@@ -148,7 +153,7 @@ export async function mount(root, ctx) {
     if (!side.version) {
       side.doc = null;
       card.info.textContent = "This run has no map versions yet.";
-      plots[key].destroy();
+      plots[key].clear();
       syncUrl();
       drawDiff();
       return;
@@ -181,7 +186,7 @@ export async function mount(root, ctx) {
       return;
     }
     if (!sameGrid(A.axes, B.axes)) {
-      plots.diff.destroy();
+      plots.diff.clear();
       stats.replaceChildren(h("span", { class: "banner warn" }, "The two versions have different grids; no cell-by-cell difference."));
       return;
     }
