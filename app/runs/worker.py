@@ -371,8 +371,9 @@ class RunSession:
         """Samples per estimator chunk: one live frame's worth when paced, else ~1 % of the
         log; a divisor of the version cadence when one is near, so versions land on it."""
         if self.options.pace is not None:
-            # chunks 10 % longer than a frame interval, so each gets its frame despite jitter
-            per_frame = self.dataset.rate_hz * self.options.pace / (0.9 * self.ctx.live_fps)
+            # Half a frame interval of log per chunk: every frame interval then has new
+            # samples, so the tick limiter (not the chunking) sets the rate: live_fps.
+            per_frame = self.dataset.rate_hz * self.options.pace / (2.0 * self.ctx.live_fps)
             desired = max(1, int(per_frame))
         else:
             desired = min(20_000, max(256, self.n // 100))
@@ -498,11 +499,17 @@ class RunSession:
         raise StopRun("interrupted", "the server was stopped while the run was executing")
 
     def _sleep_until(self, target: float, snap: Snapshot) -> None:
+        """Wait for the pace clock, waking for the stop check and, while samples wait to be
+        shown, at the moment the next live frame is allowed (so frames come at live_fps)."""
         while True:
-            remaining = target - time.monotonic()
+            now = time.monotonic()
+            remaining = target - now
             if remaining <= 0:
                 return
-            time.sleep(min(remaining, self.ctx.cancel_poll_s))
+            wake = min(remaining, self.ctx.cancel_poll_s)
+            if snap.sample > self.p.tick_sample:
+                wake = min(wake, max(self.p.next_tick - now, 0.0))
+            time.sleep(wake)
             self._tick(snap)
             self._check_stop(snap)
 
