@@ -582,7 +582,8 @@ class RunSession:
 
         self._durably(write, stored=lambda: self._has_version(snap.sample))
         self.p.version_sample = z
-        self._tick(snap, force=True, metrics=metrics)
+        time.sleep(max(0.0, self.p.next_tick - time.monotonic()))  # the final frame too
+        self._tick(snap, force=True, metrics=metrics)  # keeps to live_fps
         self._status("succeeded", None)
 
     # -- results --------------------------------------------------------------------------------
