@@ -1,10 +1,13 @@
 """Alembic environment for mapwise (SQLite and PostgreSQL).
 
 The URL comes from the caller (``app.db.migrate`` sets ``sqlalchemy.url``), else from
-``MAPWISE_DATABASE_URL``. ``render_as_batch`` lets SQLite alter tables by copy-and-move.
+``MAPWISE_DATABASE_URL``. ``render_as_batch`` lets SQLite alter tables by copy-and-move, with
+foreign keys off while it does (else the copy's drop cascades) and checked afterwards.
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 from alembic import context
 
@@ -41,9 +44,25 @@ def run_online() -> None:
     engine = make_engine(_url())
     try:
         with engine.connect() as connection:
+            sqlite = connection.dialect.name == "sqlite"
+            if sqlite:
+                # Batch mode rebuilds a table by copy, drop and rename: with foreign keys on,
+                # dropping the old ``runs`` would cascade into ``map_versions`` and delete
+                # every version. The pragma only takes effect outside a transaction, so it
+                # goes straight to the driver before SQLAlchemy begins one.
+                connection.connection.driver_connection.execute("PRAGMA foreign_keys=OFF")
             _run(connection)
+            if sqlite:
+                _check_foreign_keys(connection.connection.driver_connection)
     finally:
         engine.dispose()
+
+
+def _check_foreign_keys(sqlite_connection: Any) -> None:
+    """After the rebuild, every reference must still resolve (what the pragma skipped)."""
+    broken = sqlite_connection.execute("PRAGMA foreign_key_check").fetchall()
+    if broken:
+        raise RuntimeError(f"the migration left dangling foreign keys: {broken[:5]}")
 
 
 def _run(connection: object) -> None:

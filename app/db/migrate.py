@@ -3,6 +3,9 @@ server makes at start-up (an out-of-date shared database is never migrated silen
 
 from __future__ import annotations
 
+import fcntl
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Literal
 
@@ -10,7 +13,8 @@ from alembic import command
 from alembic.config import Config
 from alembic.runtime.migration import MigrationContext
 from alembic.script import ScriptDirectory
-from sqlalchemy import inspect
+from sqlalchemy import inspect, text
+from sqlalchemy.engine import make_url
 
 from app.db.engine import make_engine, normalise_url
 from app.resources import resource_dir
@@ -44,8 +48,48 @@ def current_revision(url: str) -> str | None:
         engine.dispose()
 
 
+MIGRATION_LOCK_KEY = 0x6D617077  # "mapw": the PostgreSQL advisory lock of migrations
+
+
 def upgrade(url: str, revision: str = "head") -> None:
-    command.upgrade(alembic_config(url), revision)
+    """Migrate to ``revision``, one process at a time: two servers starting on an empty
+    database, or ``mapwise db upgrade`` run twice, never migrate concurrently (the second
+    waits, then finds the schema already there)."""
+    with migration_lock(url):
+        command.upgrade(alembic_config(url), revision)
+
+
+@contextmanager
+def migration_lock(url: str) -> Iterator[None]:
+    """PostgreSQL: a session advisory lock; SQLite: an exclusive ``flock`` on a file beside
+    the database (an in-memory database needs none)."""
+    url = normalise_url(url)
+    if url.startswith("postgresql"):
+        engine = make_engine(url)
+        try:
+            with engine.connect() as connection:
+                connection.execute(text("SELECT pg_advisory_lock(:k)"), {"k": MIGRATION_LOCK_KEY})
+                connection.commit()
+                try:
+                    yield
+                finally:
+                    connection.execute(
+                        text("SELECT pg_advisory_unlock(:k)"), {"k": MIGRATION_LOCK_KEY}
+                    )
+                    connection.commit()
+        finally:
+            engine.dispose()
+        return
+    database = make_url(url).database
+    if not database or database == ":memory:":
+        yield
+        return
+    with open(f"{database}.migrate-lock", "a+b") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
 
 
 @dataclass(frozen=True, slots=True)

@@ -3,8 +3,8 @@ PostgreSQL with the API processes (``MAPWISE_EXECUTOR=dask``):
 
 * a run through Dask ends on the map of the estimator run directly;
 * its live frames reach a viewer connected to *another* API process;
-* a worker killed mid-run: the run finishes on the other worker, resumed from its last
-  version, once, on the uninterrupted map, with the lost attempt counted;
+* a worker killed mid-run, and mid-sweep: the run finishes on the other worker, resumed
+  from its last version, once, on the uninterrupted map, with the lost attempt counted;
 * the API process killed mid-sweep: every run still reaches a terminal state, correctly.
 """
 
@@ -117,6 +117,48 @@ def test_a_killed_worker_mid_run_is_resumed_elsewhere_once(
         assert steps == sorted(set(steps))  # nothing written twice
         assert [v["final"] for v in versions].count(True) == 1
         cluster.wait_for_workers(2)  # the nanny restarted the worker
+    finally:
+        server.stop()
+
+
+def test_a_worker_killed_mid_sweep_loses_no_run_and_doubles_none(
+    cluster: DaskCluster, database: str, tmp_path: Any
+) -> None:
+    server = _dask_server(database, cluster)
+    text = log_csv(2000, seed=54, rate_hz=100.0)  # 20 s of log: 2–4 s a run at pace 5–10
+    try:
+        cluster.wait_for_workers(2)
+        dataset = upload_ok(server.http, text)
+        body = run_body(dataset["id"], version_every={"samples": 250}) | {
+            "parameters": {"sigma_w": [0.003, 0.01, 0.03], "pace": [5, 10]},
+            "metric": "output_rmse",
+        }
+        sweep = server.http.post("/api/sweeps", json=body).json()
+        victim = sweep["runs"][0]["id"]
+        deadline = time.monotonic() + 60
+        while server.get(f"/api/runs/{victim}")["n_versions"] < 1:
+            assert time.monotonic() < deadline, cluster.output()
+            time.sleep(0.05)
+        address = cluster.worker_running(f"mapwise-run-{victim}-")
+        os.kill(cluster.worker_pids()[address], signal.SIGKILL)
+        deadline = time.monotonic() + 180
+        while True:
+            doc = server.get(f"/api/sweeps/{sweep['id']}")
+            if all(r["status"] in TERMINAL for r in doc["runs"]):
+                break
+            assert time.monotonic() < deadline, (doc["counts"], cluster.output())
+            time.sleep(0.2)
+        assert doc["counts"] == {"succeeded": 6}
+        runs = [server.get(f"/api/runs/{r['id']}") for r in doc["runs"]]
+        assert sum(r["lost_attempts"] for r in runs) == 1
+        assert next(r for r in runs if r["id"] == victim)["lost_attempts"] == 1
+        for run in doc["runs"]:
+            config = {k: v for k, v in run["params"].items() if k != "pace"}
+            expected = reference_run(text, tmp_path, "skf", **config)["values"]
+            np.testing.assert_array_equal(_final(server, run["id"]), expected)
+            versions = server.get(f"/api/runs/{run['id']}/versions")["items"]
+            assert [v["final"] for v in versions].count(True) == 1
+        cluster.wait_for_workers(2)
     finally:
         server.stop()
 
