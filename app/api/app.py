@@ -9,6 +9,7 @@ endpoints touching the database or the numerics are plain functions run in the t
 from __future__ import annotations
 
 import asyncio
+import json
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from typing import Any
@@ -22,7 +23,12 @@ from app.api.routers import base_maps, catalog, datasets, frontend, runs, stream
 from app.config import Settings, get_settings
 from app.db.engine import Database
 from app.db.migrate import check_schema, upgrade
-from app.errors import PayloadTooLargeError, install_error_handlers
+from app.errors import (
+    AppError,
+    InvalidRequestError,
+    PayloadTooLargeError,
+    install_error_handlers,
+)
 from app.logs import install_redaction
 from app.runs.executor import RunExecutor, make_executor
 from app.runs.hub import LiveHub
@@ -110,9 +116,67 @@ def create_app(settings: Settings | None = None, *, execute_runs: bool = True) -
             allow_methods=["GET", "POST", "PATCH", "DELETE"],
             allow_headers=["Authorization", "Content-Type"],
         )
+    app.add_middleware(StrictJson)
     app.add_middleware(BodyLimit, max_bytes=settings.max_upload_bytes + MULTIPART_OVERHEAD)
     app.add_middleware(SecurityHeaders)
     return app
+
+
+class StrictJson:
+    """JSON request bodies are strict JSON: ``NaN``, ``Infinity`` and ``-Infinity`` (which
+    Python's json module accepts by default) are refused with 422 before any handler sees
+    them, so no non-finite number can enter a config, a gate or a map."""
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        headers = dict(scope.get("headers", [])) if scope["type"] == "http" else {}
+        if b"json" not in headers.get(b"content-type", b""):
+            await self.app(scope, receive, send)
+            return
+        chunks: list[bytes] = []
+        while True:
+            message = await receive()
+            if message["type"] != "http.request":
+                await self.app(scope, receive, send)  # a disconnect: nothing to check
+                return
+            chunks.append(message.get("body", b""))
+            if not message.get("more_body", False):
+                break
+        body = b"".join(chunks)
+        token = _non_finite_token(body)
+        if token is not None:
+            error = InvalidRequestError(
+                f"the body holds {token}, which is not a JSON number; numbers must be finite"
+            )
+            await _send_error(send, error)
+            return
+        delivered = False
+
+        async def replay() -> Message:
+            nonlocal delivered
+            if delivered:
+                return await receive()
+            delivered = True
+            return {"type": "http.request", "body": body, "more_body": False}
+
+        await self.app(scope, replay, send)
+
+
+def _non_finite_token(body: bytes) -> str | None:
+    """``NaN``/``Infinity``/``-Infinity`` if the body (valid JSON otherwise) holds one."""
+    found: list[str] = []
+
+    def constant(name: str) -> float:
+        found.append(name)
+        return 0.0
+
+    try:
+        json.loads(body, parse_constant=constant)
+    except ValueError:
+        return None  # not JSON at all: the handler reports that
+    return found[0] if found else None
 
 
 class SecurityHeaders:
@@ -200,9 +264,7 @@ class BodyLimit:
         await self.app(scope, limited_receive, guarded_send)
 
 
-async def _send_error(send: Send, error: PayloadTooLargeError) -> None:
-    import json
-
+async def _send_error(send: Send, error: AppError) -> None:
     body = json.dumps(error.body()).encode()
     headers: list[Any] = [
         (b"content-type", b"application/json"),
