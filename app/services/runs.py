@@ -55,16 +55,22 @@ class RunService:
         self.settings = settings
         self.executor = executor
 
-    def submit(self, run_id: int) -> None:
-        """Hand a stored run to the executor."""
+    def need_executor(self) -> None:
+        """Refuse work before anything is stored when this server executes no runs."""
         if self.executor is None:
             raise ConflictError("this server does not execute runs", field=None)
+
+    def submit(self, run_id: int) -> None:
+        """Hand a stored run to the executor."""
+        self.need_executor()
+        assert self.executor is not None
         self.executor.submit(run_id)
 
     # -- lifecycle ----------------------------------------------------------------------------
 
     def create(self, request: RunRequest) -> Run:
         """Plan and store the run in one transaction, then hand it to the executor."""
+        self.need_executor()
         run = self._store(request)
         self.submit(run.id)
         return run

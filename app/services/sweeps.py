@@ -24,7 +24,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from app.db.engine import Database
 from app.db.repositories import GroupRepo, RunRepo, VersionRepo
 from app.domain import Page, Run, RunGroup
-from app.errors import AppError, ConflictError, InvalidRequestError
+from app.errors import AppError, InvalidRequestError
 from app.scenario_run import merge
 from app.services.run_plan import RunRequest, TableSpec
 from app.services.runs import RunService
@@ -158,12 +158,8 @@ class SweepService:
         self.db = db
         self.runs = runs
 
-    def _need_executor(self) -> None:
-        if self.runs.executor is None:
-            raise ConflictError("this server does not execute runs", field=None)
-
     def create_sweep(self, request: SweepRequest) -> GroupView:
-        self._need_executor()
+        self.runs.need_executor()
         points = expand_parameters(request.parameters, samples=request.samples, seed=request.seed)
         base = request.model_dump(mode="json", include={"dataset_id", "estimator", "signals"})
         table = None if request.table is None else request.table.model_dump(mode="json")
@@ -193,7 +189,7 @@ class SweepService:
         return GroupView(group, runs)
 
     def create_batch(self, request: BatchRequest) -> GroupView:
-        self._need_executor()
+        self.runs.need_executor()
         table = None if request.table is None else request.table.model_dump(mode="json")
         with self.db.write() as s:
             group = GroupRepo(s).add(

@@ -339,3 +339,16 @@ def test_rate_and_holdoff_gates_through_the_api(client: TestClient, tmp_path) ->
     assert np.sum(cells["rejected"]["holdoff:temp"]) == pytest.approx((held & ~fast).sum())
     expected = reference_run(text, tmp_path, "skf", accept=~(fast | held))["values"]
     np.testing.assert_array_equal(np.array(final_values(client, done["id"])["values"]), expected)
+
+
+def test_a_server_that_executes_no_runs_refuses_them_and_stores_nothing(database_url: str) -> None:
+    settings = service_settings(database_url)
+    with TestClient(create_app(settings, execute_runs=False)) as client:
+        dataset = upload_ok(client, log_csv(300, seed=96))
+        before = client.get("/api/runs", params={"limit": 1}).json()["total"]
+        response = client.post("/api/runs", json=run_body(dataset["id"]))
+        assert response.status_code == 409
+        assert "does not execute runs" in response.json()["error"]["message"]
+        sweep = run_body(dataset["id"]) | {"parameters": {"sigma_w": [0.01, 0.1]}}
+        assert client.post("/api/sweeps", json=sweep).status_code == 409
+        assert client.get("/api/runs", params={"limit": 1}).json()["total"] == before
