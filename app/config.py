@@ -37,6 +37,11 @@ class Settings(BaseSettings):
         description="Origins allowed by CORS (comma-separated in the env); none by default.",
     )
     max_upload_mb: float = Field(512.0, gt=0, description="Largest accepted upload, in MiB.")
+    max_decompressed_mb: float = Field(
+        512.0,
+        gt=0,
+        description="Most an MCAP or MDF4 upload may inflate to (compressed chunks), in MiB.",
+    )
     run_workers: int = Field(
         default_factory=lambda: max(2, min(8, os.cpu_count() or 2)),
         ge=1,
@@ -135,6 +140,10 @@ class Settings(BaseSettings):
     @property
     def max_upload_bytes(self) -> int:
         return int(self.max_upload_mb * 1024 * 1024)
+
+    @property
+    def max_decompressed_bytes(self) -> int:
+        return int(self.max_decompressed_mb * 1024 * 1024)
 
     @property
     def backend(self) -> Literal["sqlite", "postgresql"]:

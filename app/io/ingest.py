@@ -38,7 +38,7 @@ class IngestLimits:
     max_header_bytes: int = 64 * 2**10
     max_channels: int = 2000
     min_samples: int = 2
-    max_decompressed_bytes: int = 2 * 2**30
+    max_decompressed_bytes: int = 512 * 2**20
 
 
 @dataclass(frozen=True, slots=True)

@@ -116,9 +116,11 @@ class DatasetService:
         name: str | None,
         units: dict[str, str] | None,
         max_bytes: int,
+        max_decompressed_bytes: int = IngestLimits.max_decompressed_bytes,
     ) -> Dataset:
         """Parse and validate the whole file first; store it only if it is usable."""
-        parsed = ingest(source, units=units, limits=IngestLimits(max_bytes=max_bytes))
+        limits = IngestLimits(max_bytes=max_bytes, max_decompressed_bytes=max_decompressed_bytes)
+        parsed = ingest(source, units=units, limits=limits)
         with self.db.write() as s:
             return DatasetRepo(s).add(
                 name=_clean_name(name or filename, f"{parsed.source} upload"),

@@ -47,6 +47,7 @@ def upload_dataset(
         name=name,
         units=_units(units),
         max_bytes=services.settings.max_upload_bytes,
+        max_decompressed_bytes=services.settings.max_decompressed_bytes,
     )
     return DatasetOut.of(dataset)
 
