@@ -3,12 +3,17 @@ it is a test, tests/app/service/test_load.py).
 
 ``--users`` concurrent users for ``--seconds``, each in a loop: upload a small CSV log, start
 a paced SKF run on it, watch its live stream for a few seconds, and read the lists and the
-run. Then every run started is waited for. Reported: requests and requests/s, p50/p99
-latency, live frames/s delivered, errors (any non-2xx or transport error), and lost runs
-(started but not ``succeeded``).
+run. Besides them, ``--streams`` long runs stream the whole time, each watched by a viewer
+from start to end (the soak's "8 streaming runs"). Then every run started is waited for.
+Reported: requests and requests/s, p50/p95/p99 latency, live frames/s delivered and their
+delay from the worker to the viewer, errors (any non-2xx or transport error), lost runs
+(started but not ``succeeded``) and, for a server started here, its memory growth between
+the first and the last minute.
 
     .venv/bin/python scripts/load.py [--url URL | --database-url URL] [--users 10]
-        [--seconds 60] [--json]
+        [--streams 0] [--seconds 60] [--json]
+
+The soak of README: ``--users 20 --streams 8 --seconds 1800``.
 """
 
 from __future__ import annotations
@@ -62,6 +67,7 @@ class Tally:
     frames: int = 0
     frame_delays: list[float] = field(default_factory=list)
     runs: list[int] = field(default_factory=list)
+    cut: set[int] = field(default_factory=set)  # streaming runs cancelled at the end
 
     async def call(self, client: httpx.AsyncClient, method: str, path: str, **kw: Any) -> Any:
         t0 = time.perf_counter()
@@ -121,6 +127,44 @@ async def user(base: str, index: int, until: float, tally: Tally, token: str | N
             await watcher
 
 
+async def streamer(base: str, index: int, until: float, tally: Tally, token: str | None) -> None:
+    """A long paced run watched from its start to its end, restarted until ``until``."""
+    headers = {"Authorization": f"Bearer {token}"} if token else {}
+    ws_base = base.replace("http", "ws", 1)
+    async with httpx.AsyncClient(base_url=base, headers=headers, timeout=60) as client:
+        files = {"file": (f"stream{index}.csv", small_log(10_000 + index, rows=12_000))}
+        dataset = await tally.call(client, "POST", "/api/datasets", files=files)
+        if dataset is None:
+            return
+        while (left := until - time.monotonic()) > 1.0:
+            run = await tally.call(client, "POST", "/api/runs", json=run_body(dataset["id"], 1))
+            if run is None:
+                return
+            tally.runs.append(int(run["id"]))
+            ws_url = f"{ws_base}/api/runs/{run['id']}/stream" + (f"?token={token}" if token else "")
+            await watch(ws_url, min(left, 130.0), tally, {})
+            status = (await client.get(f"/api/runs/{run['id']}")).json()["status"]
+            if status not in TERMINAL:  # the soak is over: cut the run (not a lost one)
+                tally.cut.add(int(run["id"]))
+                await tally.call(client, "POST", f"/api/runs/{run['id']}/cancel")
+
+
+def _rss_mb(pid: int) -> float:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+async def _sample_memory(pid: int | None, until: float, out: list[tuple[float, float]]) -> None:
+    if pid is None:
+        return
+    t0 = time.monotonic()
+    while time.monotonic() < until:
+        out.append((time.monotonic() - t0, _rss_mb(pid)))
+        await asyncio.sleep(5.0)
+
+
 async def _settle(base: str, tally: Tally, token: str | None, timeout: float) -> list[int]:
     """Runs not ``succeeded`` once every started run had time to finish."""
     headers = {"Authorization": f"Bearer {token}"} if token else {}
@@ -135,17 +179,32 @@ async def _settle(base: str, tally: Tally, token: str | None, timeout: float) ->
                     statuses[run_id] = doc["status"]
                     pending.discard(run_id)
             await asyncio.sleep(0.5)
-    return sorted(pending | {r for r, s in statuses.items() if s != "succeeded"})
+    ok = {
+        r for r, s in statuses.items() if s == "succeeded" or (r in tally.cut and s == "cancelled")
+    }
+    return sorted(pending | (set(statuses) - ok))
 
 
 def run_load(
-    base: str, *, users: int, seconds: float, token: str | None = None, settle_s: float = 300.0
+    base: str,
+    *,
+    users: int,
+    seconds: float,
+    streams: int = 0,
+    token: str | None = None,
+    settle_s: float = 300.0,
+    server_pid: int | None = None,
 ) -> dict[str, Any]:
     tally = Tally()
+    memory: list[tuple[float, float]] = []
 
     async def main() -> list[int]:
         until = time.monotonic() + seconds
-        await asyncio.gather(*(user(base, i, until, tally, token) for i in range(users)))
+        await asyncio.gather(
+            *(user(base, i, until, tally, token) for i in range(users)),
+            *(streamer(base, i, until, tally, token) for i in range(streams)),
+            _sample_memory(server_pid, until, memory),
+        )
         return await _settle(base, tally, token, settle_s)
 
     t0 = time.perf_counter()
@@ -164,6 +223,8 @@ def run_load(
         "frames": tally.frames,
         "frames_per_s": round(tally.frames / seconds, 1),
         "frame_delay_p99_s": round(delays[int(0.99 * (len(delays) - 1))], 3),
+        "streams": streams,
+        "memory_growth_pct": _growth(memory, seconds),
         "runs_started": len(tally.runs),
         "lost_runs": lost,
         "errors": tally.errors[:20],
@@ -172,12 +233,23 @@ def run_load(
     }
 
 
+def _growth(memory: list[tuple[float, float]], seconds: float) -> float | None:
+    """Server memory of the last minute against the first (after a 60 s warm-up), percent."""
+    if len(memory) < 4:
+        return None
+    window = min(60.0, seconds / 4)
+    first = [m for t, m in memory if window <= t < 2 * window] or [memory[1][1]]
+    last = [m for t, m in memory if t >= memory[-1][0] - window] or [memory[-1][1]]
+    return round(100.0 * (statistics.mean(last) / statistics.mean(first) - 1.0), 1)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--url", help="a running server (default: start one)")
     parser.add_argument("--database-url", help="for the server started here (default SQLite)")
     parser.add_argument("--token", help="bearer token of --url")
     parser.add_argument("--users", type=int, default=10)
+    parser.add_argument("--streams", type=int, default=0, help="long runs watched throughout")
     parser.add_argument("--seconds", type=float, default=60.0)
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
@@ -190,7 +262,14 @@ def main() -> None:
         server = Server(args.database_url or f"sqlite:///{work / 'load.db'}")
         args.url = server.base
     try:
-        result = run_load(args.url, users=args.users, seconds=args.seconds, token=args.token)
+        result = run_load(
+            args.url,
+            users=args.users,
+            seconds=args.seconds,
+            streams=args.streams,
+            token=args.token,
+            server_pid=None if server is None else server.process.pid,
+        )
     finally:
         if server is not None:
             server.stop()
