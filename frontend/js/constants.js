@@ -62,6 +62,14 @@ export const TRAIL_POINTS = 400;
 export const BACKOFF = Object.freeze({ initialMs: 500, maxMs: 10000, factor: 2 });
 
 export const RUN_DONE = new Set(["succeeded", "failed", "cancelled", "interrupted"]);
+/** Sweeps and batches are polled this often while any of their runs is queued or running. */
+export const GROUP_POLL_MS = 1000;
+/** A sweep's runs are drawn on a log axis when the parameter's values span more than this ratio. */
+export const LOG_AXIS_RATIO = 10;
+/** Standardised deviations |z| beyond this mark a vehicle's cell as deviating (the API's count). */
+export const DEVIATION_Z = 3;
+/** The fixed colour range of the deviation maps. */
+export const DEVIATION_RANGE = Object.freeze([-5, 5]);
 export const RUN_ACTIVE = new Set(["queued", "running"]);
 
 export const PACES = Object.freeze([

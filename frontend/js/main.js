@@ -4,10 +4,12 @@ import { EVT, SEL, STORAGE } from "./constants.js";
 import { h, icon, ICONS, qs, qsa, toast } from "./dom.js";
 import { loadPlotly } from "./plot.js";
 import { Router } from "./router.js";
+import * as batches from "./views/batches.js";
 import * as compare from "./views/compare.js";
 import * as datasets from "./views/datasets.js";
 import * as newRun from "./views/new-run.js";
 import * as runLive from "./views/run-live.js";
+import * as sweeps from "./views/sweeps.js";
 import * as versions from "./views/versions.js";
 
 const ROUTES = [
@@ -16,6 +18,10 @@ const ROUTES = [
   { path: /^\/runs\/new\/?$/, view: newRun, section: "new-run" },
   { path: /^\/runs\/(\d+)\/?$/, keys: ["id"], view: runLive, section: "run" },
   { path: /^\/compare\/?$/, view: compare, section: "compare" },
+  { path: /^\/sweeps\/?$/, view: sweeps, section: "sweeps" },
+  { path: /^\/sweeps\/(\d+)\/?$/, keys: ["id"], view: sweeps, section: "sweeps" },
+  { path: /^\/batches\/?$/, view: batches, section: "batches" },
+  { path: /^\/batches\/(\d+)\/?$/, keys: ["id"], view: batches, section: "batches" },
   { path: /^\/versions\/?$/, view: versions, section: "versions" },
 ];
 

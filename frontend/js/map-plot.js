@@ -7,6 +7,8 @@
  * setRange (cells beyond it saturate at the ends of the scale), or else seeded from the first
  * frame on "nice" bounds and widened only when a value leaves them, in quarter-span steps, so
  * the same values always give the same range and successive frames stay comparable.
+ * A "deviation" plot shows standardised deviations z on a diverging scale, with the cells
+ * listed in frame.outlines (e.g. |z| > 3) outlined.
  */
 import { fmt, h, withUnit } from "./dom.js";
 import {
@@ -16,7 +18,9 @@ import {
 
 const TINY = 1e-300;
 /** Trace names (also what tests and hover look for). */
-export const TRACE = Object.freeze({ trail: "trail", point: "operating point", active: "active cell" });
+export const TRACE = Object.freeze({ trail: "trail", point: "operating point", active: "active cell", outlines: "outlined cells" });
+/** Kinds drawn on the diverging scale, symmetric about zero. */
+const DIVERGING = new Set(["diff", "deviation"]);
 let uid = 0;
 
 /**
@@ -38,7 +42,7 @@ export class SliceGroup {
 export class MapPlot {
   /**
    * @param {HTMLElement} el
-   * @param {{kind?: "value"|"variance"|"visits"|"diff", unit?: string, label?: string, mode?: "heatmap"|"surface",
+   * @param {{kind?: "value"|"variance"|"visits"|"diff"|"deviation", unit?: string, label?: string, mode?: "heatmap"|"surface",
    *   gaps?: boolean, slices?: SliceGroup}} opts
    */
   constructor(el, { kind = "value", unit = "", label = "value", mode = "heatmap", gaps = true, slices = null } = {}) {
@@ -83,7 +87,8 @@ export class MapPlot {
   }
 
   /**
-   * @param {{axes, values, variances?, visits?, trail?: {x: number[], y: number[]}, activeCell?: number[]|null}} frame
+   * @param {{axes, values, variances?, visits?, weights?, trail?: {x: number[], y: number[]}, activeCell?: number[]|null,
+   *   outlines?: number[][]}} frame  outlines: index tuples (one index per axis) of cells to outline
    */
   render(frame) {
     this.last = frame;
@@ -175,14 +180,16 @@ export class MapPlot {
     const idx = this.slice.index;
     const cut = (m) => (m ? sliceNested(m, idx) : m);
     const cell = frame.activeCell;
-    const inSlice = Array.isArray(cell) && cell.length === frame.axes.length && idx.every((k, n) => cell[n + 2] === k);
+    const inSlice = (c) => Array.isArray(c) && c.length === frame.axes.length && idx.every((k, n) => c[n + 2] === k);
     return {
       ...frame,
       axes: frame.axes.slice(0, 2),
       values: cut(frame.values),
       variances: cut(frame.variances),
       visits: cut(frame.visits),
-      activeCell: inSlice ? cell.slice(0, 2) : null,
+      weights: cut(frame.weights),
+      activeCell: inSlice(cell) ? cell.slice(0, 2) : null,
+      outlines: frame.outlines?.filter(inSlice).map((c) => c.slice(0, 2)),
       sliceText: this.slice.axes.map((a, k) => `${a.name} = ${fmt(a.breakpoints[idx[k]])} ${a.unit ?? ""}`).join("<br>"),
     };
   }
@@ -199,7 +206,7 @@ export class MapPlot {
       scale: this.scale(),
       range: this.range,
       log: this.kind === "variance",
-      title: this.kind === "variance" || this.kind === "visits" ? this.kind : this.unit,
+      title: this.kind === "variance" || this.kind === "visits" ? this.kind : this.kind === "deviation" ? "z" : this.unit,
       top: size?.t ?? 8,
       height: size?.h ?? null,
       clipped: { lo: this.range !== null && lo < this.range[0], hi: this.range !== null && hi > this.range[1] },
@@ -216,7 +223,7 @@ export class MapPlot {
       if (v > hi) hi = v;
     }
     this.extremes = [lo, hi];
-    if (this.kind === "diff") {
+    if (DIVERGING.has(this.kind)) {
       if (this.fixed && this.range) return;
       const m = Math.max(Math.abs(lo), Math.abs(hi)) || 1;
       this.range = [-m, m];
@@ -249,7 +256,7 @@ export class MapPlot {
   scale() {
     if (this.kind === "variance") return SCALE_VARIANCE;
     if (this.kind === "visits") return SCALE_VALUE;
-    if (this.kind === "diff") return SCALE_DIFF;
+    if (DIVERGING.has(this.kind)) return SCALE_DIFF;
     return SCALE_VIRIDIS;
   }
 
@@ -257,6 +264,9 @@ export class MapPlot {
     const [a0, a1] = axes;
     const head = `${a0.name} = %{x} ${a0.unit ?? ""}` + (a1 ? `<br>${a1.name} = %{y} ${a1.unit ?? ""}` : "") +
       (sliceText ? `<br>${sliceText}` : "");
+    if (this.kind === "deviation") {
+      return `${head}<br><b>z = %{customdata[0]}</b><br>weight in the merge = %{customdata[1]}<extra></extra>`;
+    }
     const name = this.kind === "diff" ? `Δ ${this.label}` : this.label;
     return `${head}<br><b>${name} = %{customdata[0]} ${this.unit}</b><br>variance = %{customdata[1]}<br>visits = %{customdata[2]}<extra></extra>`;
   }
@@ -298,6 +308,19 @@ export class MapPlot {
       const [y0, y1] = brick(y, cell[1]);
       data.push({ type: "scatter", mode: "lines", name: TRACE.active, x: [x0, x1, x1, x0, x0], y: [y0, y0, y1, y1, y0],
         hoverinfo: "skip", showlegend: false, line: { color: t.activeCell, width: 2.5 } });
+    }
+    if (frame.outlines) {
+      // One trace for every outlined cell: a closed brick each, separated by gaps (null).
+      const ox = [];
+      const oy = [];
+      for (const [i, j] of frame.outlines) {
+        const [x0, x1] = brick(x, i);
+        const [y0, y1] = brick(y, j);
+        ox.push(x0, x1, x1, x0, x0, null);
+        oy.push(y0, y0, y1, y1, y0, null);
+      }
+      data.push({ type: "scatter", mode: "lines", name: TRACE.outlines, x: ox, y: oy, hoverinfo: "skip", showlegend: false,
+        connectgaps: false, line: { color: t.outline, width: 2.5 } });
     }
     const layout = baseLayout({
       xaxis: axis(withUnit(a0.name, a0.unit), { range: edges(x), autorange: false, showgrid: false, zeroline: false }),
@@ -383,8 +406,8 @@ export class MapPlot {
     data.push({
       x, y: this.kind === "variance" ? (frame.variances ?? []) : z, mode: "lines+markers", name: this.label,
       customdata: cellText(frame), hovertemplate: this.hover(frame.axes),
-      line: { color: this.kind === "diff" ? t.danger : t.accent, width: 2 }, marker: { size: 6 },
-      type: this.kind === "diff" ? "bar" : "scatter",
+      line: { color: DIVERGING.has(this.kind) ? t.danger : t.accent, width: 2 }, marker: { size: 6 },
+      type: DIVERGING.has(this.kind) ? "bar" : "scatter",
     });
     const trail = frame.trail;
     if (trail?.x?.length && this.kind === "value") {
@@ -468,7 +491,9 @@ export function logNested(m) {
 
 /** Hover text per cell: [value, variance, visits], already formatted, laid out like the z grid. */
 function cellText(frame) {
-  const { values, variances, visits } = frame;
+  const { values, visits } = frame;
+  // The second entry: a cell's weight in a merge where there are weights, else its variance.
+  const variances = frame.weights ?? frame.variances;
   const cell = (i, j) => {
     const pick = (m) => (m ? (j === undefined ? m[i] : m[i]?.[j]) : null);
     const v = pick(values);

@@ -76,6 +76,7 @@ export function theme() {
     trail: cssVar("--trail"),
     trailEdge: cssVar("--trail-edge"),
     activeCell: cssVar("--active-cell"),
+    outline: cssVar("--outline-cell"),
     font: cssVar("--font"),
     dark: document.documentElement.dataset.theme === "dark",
   };

@@ -209,3 +209,26 @@ function objectControl(schema, inner, path, start, nullable, opts, { name, label
   };
   return { el: fieldset, read, section: true };
 }
+
+/**
+ * The settings a sweep can vary: every number (also "a number, or one per cell") and every
+ * choice of the schema, sections included under their dotted path ("sensor.lag").
+ * @returns {{key: string, label: string, type: "number"|"integer"|"enum", options?: any[], bounds: string}[]}
+ */
+export function sweepableKeys(schema, { hide = new Set() } = {}) {
+  const out = [];
+  const walk = (node, path) => {
+    for (const [key, prop] of Object.entries(node.properties ?? {})) {
+      if (!path.length && hide.has(key)) continue;
+      const { inner, alternatives } = unwrap(prop, schema);
+      const full = [...path, key];
+      const label = path.length ? `${path.map(humanise).join(" › ")} › ${titleOf(key, inner)}` : titleOf(key, inner);
+      const numeric = [inner, ...alternatives].find((a) => a.type === "number" || a.type === "integer");
+      if (inner.type === "object" && inner.properties) walk(inner, full);
+      else if (inner.enum) out.push({ key: full.join("."), label, type: "enum", options: inner.enum, bounds: "" });
+      else if (numeric) out.push({ key: full.join("."), label, type: numeric.type, bounds: rangeText(numeric) });
+    }
+  };
+  walk(resolve(schema, schema), []);
+  return out;
+}

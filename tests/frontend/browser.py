@@ -124,3 +124,15 @@ def plot_data(page: Page, selector: str) -> list[dict]:
         "z: t.z ?? null, x: Array.from(t.x ?? []), y: Array.from(t.y ?? []), "
         "zmin: t.zmin ?? null, zmax: t.zmax ?? null}))",
     )
+
+
+# The dashboard's own view routes (the History-API router handles them in the page).
+
+
+def serves_group_views(server: Server) -> bool:
+    """Whether ``mapwise serve`` answers ``/sweeps`` and ``/batches`` with the dashboard page."""
+    with server.api() as client:
+        return all(
+            client.get(path).headers.get("content-type", "").startswith("text/html")
+            for path in ("/sweeps", "/sweeps/1", "/batches", "/batches/1")
+        )

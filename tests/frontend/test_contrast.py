@@ -13,7 +13,7 @@ import pytest
 from playwright.sync_api import Page, expect
 
 from tests.frontend.browser import shot, upload_example, wait_run
-from tests.frontend.test_compare_versions_view import start_run
+from tests.frontend.test_compare_versions_view import GRID, start_run
 
 CONTRAST = (Path(__file__).parent / "js" / "contrast.js").read_text()
 
@@ -25,15 +25,44 @@ def runs(server) -> list[dict]:
         return [wait_run(api, start_run(api, dataset["id"], e)["id"]) for e in ("skf", "kf")]
 
 
-def views(runs: list[dict]) -> list[tuple[str, str]]:
+@pytest.fixture(scope="module")
+def groups(server, runs: list[dict]) -> dict[str, dict]:
+    """A finished grid sweep and a finished batch over two logs (its aggregate drawn)."""
+    did = runs[0]["dataset_id"]
+    common = {"estimator": "skf", "signals": {"y": "nox_ppm"}, "table": GRID}
+    with server.api() as api:
+        other = upload_example(api, f"contrast-b-{uuid.uuid4().hex[:8]}")
+        sweep = api.post(
+            "/api/sweeps",
+            json={
+                **common,
+                "dataset_id": did,
+                "config": {"theta0": 300, "p0": 1e4},
+                "parameters": {"sigma_w": [0.5, 5, 50], "sigma_v": [10, 50]},
+            },
+        ).json()
+        config = {"theta0": 300, "p0": 1e4, "sigma_w": 5, "sigma_v": 50}
+        batch = api.post(
+            "/api/batches", json={**common, "dataset_ids": [did, other["id"]], "config": config}
+        ).json()
+        for group in (sweep, batch):
+            for run in group["runs"]:
+                wait_run(api, run["id"])
+    return {"sweep": sweep, "batch": batch}
+
+
+def views(runs: list[dict], groups: dict[str, dict]) -> list[tuple[str, str]]:
     a, b = runs
     did = a["dataset_id"]
     return [
         ("datasets", f"/datasets?id={did}"),
         ("new-run", f"/runs/new?dataset={did}&estimator=skf,kf&signals=y:nox_ppm"),
+        ("new-sweep", f"/runs/new?dataset={did}&estimator=skf&signals=y:nox_ppm&mode=sweep"),
         ("run", f"/runs/{a['id']}"),
         ("compare", f"/compare?runs={a['id']},{b['id']}"),
         ("versions", f"/versions?a={a['id']}"),
+        ("sweep", f"/sweeps/{groups['sweep']['id']}"),
+        ("batch", f"/batches/{groups['batch']['id']}"),
     ]
 
 
@@ -59,14 +88,16 @@ def test_the_contrast_check_finds_poor_contrast(page: Page, runs: list[dict]) ->
 
 
 @pytest.mark.parametrize("theme", ["light", "dark"])
-def test_text_and_controls_have_enough_contrast(page: Page, runs: list[dict], theme: str) -> None:
+def test_text_and_controls_have_enough_contrast(
+    page: Page, server, runs: list[dict], groups: dict[str, dict], theme: str
+) -> None:
     page.goto("/datasets")
     expect(page.locator("[data-page-title]")).to_have_text("Datasets")
     if theme == "dark":
         page.locator("[data-theme-toggle]").click()
     expect(page.locator("html")).to_have_attribute("data-theme", theme)
     problems = {}
-    for name, url in views(runs):
+    for name, url in views(runs, groups):
         page.goto(url)
         expect(page.locator("[data-page-title]")).to_be_visible()
         page.wait_for_load_state("networkidle")
@@ -78,6 +109,16 @@ def test_text_and_controls_have_enough_contrast(page: Page, runs: list[dict], th
             page.fill("#cfg-skf-sigma_v", "-1")
             page.locator("[data-start]").click()
             expect(page.locator(".field-error").first).to_be_visible()
+        if name == "new-sweep":
+            # A second parameter given as a range, a refused value with its error text.
+            page.locator("[data-add-sweep-param]").click()
+            page.select_option("#sweep-kind-1", "range")
+            page.fill("#sweep-values-0", "1, x")
+            page.locator("[data-start]").click()
+            expect(page.locator("[data-sweep-row] .field-error").first).to_be_visible()
+        if name == "batch":
+            page.locator('[data-plot="deviation"] .main-svg').first.wait_for(state="attached")
+            page.locator('[data-plot="deviating-bars"] .main-svg').first.wait_for(state="attached")
         if name == "datasets":
             page.locator("[data-channel]").first.wait_for()
         result = measure(page)

@@ -17,7 +17,17 @@ from app.errors import NotFoundError
 from app.resources import resource_dir
 
 FRONTEND_DIR = resource_dir("frontend")
-VIEW_ROUTES = ("/datasets", "/runs/new", "/runs/{run_id}", "/compare", "/versions")
+VIEW_ROUTES = (
+    "/datasets",
+    "/runs/new",
+    "/runs/{run_id}",
+    "/compare",
+    "/versions",
+    "/sweeps",
+    "/sweeps/{sweep_id}",
+    "/batches",
+    "/batches/{batch_id}",
+)
 NO_CACHE = {"Cache-Control": "no-cache"}  # revalidate (ETag) so browsers never run stale code
 IMMUTABLE = {"Cache-Control": "public, max-age=31536000, immutable"}
 PLOTLY_URL = "/static/vendor/plotly.min.js"

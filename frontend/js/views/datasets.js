@@ -1,7 +1,8 @@
 /**
  * Datasets: upload a log (drag and drop, progress, units per column), simulate a scenario,
  * list and delete datasets, preview every channel with its unit, and map columns to the
- * signals an estimator needs before starting a run.
+ * signals an estimator needs before starting a run. Ticking several datasets offers a fleet
+ * batch over them (the New-run form in batch mode, those datasets chosen).
  */
 import { api, clearErrors, estimators, scenarios, showError } from "../api.js";
 import { EVT, SELECT } from "../constants.js";
@@ -19,7 +20,18 @@ const PREVIEW_POINTS = 400;
 const CONTROL = "select";
 
 export async function mount(root, ctx) {
-  const state = { datasets: [], selected: Number(ctx.query.get("id")) || null, plots: [] };
+  const state = { datasets: [], selected: Number(ctx.query.get("id")) || null, plots: [], picked: new Set() };
+  const batchButton = h("button", { type: "button", class: "small", "data-run-batch": "", disabled: true,
+    onclick: () => {
+      const ids = [...state.picked].sort((a, b) => a - b);
+      ctx.navigate(`/runs/new?dataset=${ids[0]}&mode=batch&datasets=${ids.join(",")}`);
+    } }, icon(ICONS.grid), "Run batch…");
+  const syncBatch = () => {
+    for (const id of state.picked) if (!state.datasets.some((d) => d.id === id)) state.picked.delete(id);
+    batchButton.disabled = state.picked.size < 2;
+    batchButton.replaceChildren(icon(ICONS.grid), state.picked.size >= 2 ? `Run batch on ${state.picked.size} datasets…` : "Run batch…");
+    batchButton.title = state.picked.size < 2 ? "Tick two or more datasets for a fleet batch" : "";
+  };
   const list = h("div", { "data-dataset-list": "" }, h("div", { class: "loading" }, "Loading datasets…"));
   const preview = h("div", { class: "stack", "data-dataset-preview": "" });
 
@@ -33,7 +45,7 @@ export async function mount(root, ctx) {
       { class: "grid side-l" },
       h("div", { class: "stack" }, uploadCard(ctx, onCreated), simulateCard(ctx, onCreated)),
       h("div", { class: "stack" },
-        card({ title: "Your datasets", bodyCls: "flush", body: list }),
+        card({ title: "Your datasets", hint: "tick several for a fleet batch", actions: [batchButton], bodyCls: "flush", body: list }),
         preview),
     ),
   );
@@ -50,12 +62,19 @@ export async function mount(root, ctx) {
   }
 
   function renderList() {
+    syncBatch();
     if (!state.datasets.length) {
       list.replaceChildren(h("div", { class: "empty" }, "No datasets yet — upload a log or simulate a scenario."));
       return;
     }
     const rows = state.datasets.map((d) =>
       h("tr", { "aria-current": d.id === state.selected ? "true" : null, dataset: { datasetId: d.id } },
+        h("td", {}, h("input", { type: "checkbox", id: `pick-ds-${d.id}`, "data-pick-dataset": d.id, checked: state.picked.has(d.id),
+          "aria-label": `Pick ${d.name} for a batch`, onchange: (e) => {
+            if (e.target.checked) state.picked.add(d.id);
+            else state.picked.delete(d.id);
+            syncBatch();
+          } })),
         h("td", { class: "wrap" },
           h("button", { class: "linklike", type: "button", "data-select-dataset": d.id,
             "aria-label": `Preview dataset ${d.name}`, onclick: () => select(d.id) }, d.name),
@@ -76,6 +95,7 @@ export async function mount(root, ctx) {
       h("div", { class: "table-wrap" },
         h("table", { class: "data" },
           h("thead", {}, h("tr", {},
+            h("th", { scope: "col" }, h("span", { class: "visually-hidden" }, "Pick for a batch")),
             h("th", { scope: "col" }, "Name"), h("th", { scope: "col", class: "num" }, "Rows"),
             h("th", { scope: "col", class: "num" }, "Rate"), h("th", { scope: "col", class: "num" }, "Duration"),
             h("th", { scope: "col", class: "num" }, "Channels"), h("th", { scope: "col" }, "Created"),

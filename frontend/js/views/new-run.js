@@ -6,13 +6,20 @@
  * it refuses one). Dataset, estimators, signals and axes live in the URL; the rest of the form
  * (breakpoints, start map, config values, pace, cadence, gates) is kept as a draft in
  * sessionStorage, so a reload shows the form as it was.
+ *
+ * The same form starts a sweep (?mode=sweep: one estimator, the settings to vary picked from
+ * its schema, each a list of values or a range drawn from, ranked by a metric) or a fleet
+ * batch (?mode=batch&datasets=1,2,3: one configuration over several datasets); the API's
+ * errors land next to the parameter ("parameters.sigma_v") or dataset ("dataset_ids[1]").
  */
 import { api, clearErrors, estimators, scenarios, showError } from "../api.js";
 import { PACES, SEL, SELECT, STORAGE } from "../constants.js";
-import { card, debounce, fmt, fmtDuration, fmtInt, h, icon, ICONS, pageHead, toast, withUnit } from "../dom.js";
+import {
+  card, debounce, fmt, fmtDuration, fmtInt, h, icon, ICONS, metricLabel, pageHead, parseNumberList, toast, withUnit,
+} from "../dom.js";
 import { gridEditor } from "../grid-editor.js";
 import { decodeSignals, encodeSignals, guessColumn, guessTable, KIND_TITLES, needsTable, rolesOf } from "../mapping.js";
-import { schemaForm } from "../schema-form.js";
+import { schemaForm, sweepableKeys } from "../schema-form.js";
 
 export const title = "New run";
 
@@ -21,6 +28,40 @@ const FROM_ELSEWHERE = new Set(["axes", "output", "output_unit", "locked"]);
 /** Controls whose values a draft keeps (file inputs cannot be restored). */
 const DRAFT_CONTROLS = "input:not([type=file]), select, textarea";
 const DRAFT_SAVE_MS = 120;
+
+/** What the form starts: a run per estimator, a sweep of one estimator, or a batch over datasets. */
+const MODES = Object.freeze([
+  { value: "single", label: "Single run", title: "New run" },
+  { value: "sweep", label: "Sweep", title: "New sweep" },
+  { value: "batch", label: "Fleet batch", title: "New batch" },
+]);
+/** Ranking metrics offered per kind of estimator (the first is the default). */
+const SWEEP_METRICS = Object.freeze({
+  "table-filter": ["output_rmse", "rmse", "map_rmse", "max_abs_error", "mean_relative_error", "coverage"],
+  "maf-observer": ["map_rmse", "output_rmse", "rmse"],
+  torque: ["ise", "mae", "sd", "rmse"],
+});
+/** Metrics where bigger is better (ranked highest first by default). */
+const HIGHER_BETTER = new Set(["coverage"]);
+/** Settings a new sweep row offers first, when the estimator has them. */
+const SWEEP_FIRST = ["sigma_w", "sigma_v", "p0", "forgetting", "mu", "gamma", "k"];
+
+function fieldError(field, message) {
+  return Object.assign(new Error(message), { field });
+}
+
+/** Remove a (dotted) key from a config object: the sweep sets it per run. */
+function dropKey(config, key) {
+  const parts = key.split(".");
+  const last = parts.pop();
+  const node = parts.reduce((n, k) => (n && typeof n === "object" ? n[k] : undefined), config);
+  if (node && typeof node === "object") delete node[last];
+}
+
+/** A default of the catalog at a dotted key ("sensor.lag"), or undefined. */
+function defaultAt(defaults, key) {
+  return key.split(".").reduce((n, k) => (n && typeof n === "object" ? n[k] : undefined), defaults ?? {});
+}
 
 function loadDraft() {
   try {
@@ -59,8 +100,12 @@ export async function mount(root, ctx) {
     scenarios().catch(() => []),
   ]);
   const q = ctx.query;
+  const batchIds = (q.get("datasets") ?? "").split(",").map(Number).filter((id) => datasets.some((d) => d.id === id));
   const state = {
-    datasetId: Number(q.get("dataset")) || datasets[0]?.id || null,
+    datasetId: Number(q.get("dataset")) || batchIds[0] || datasets[0]?.id || null,
+    mode: MODES.some((m) => m.value === q.get("mode")) ? q.get("mode") : "single",
+    batch: new Set(batchIds),
+    sweep: { estimator: null, rows: [], samples: "", seed: "0", metric: "", order: "min" },
     chosen: new Set((q.get("estimator") ?? "").split(",").filter((n) => catalog.some((e) => e.name === n))),
     signals: decodeSignals(q.get("signals")),
     axes: (q.get("axes") ?? "").split(",").filter(Boolean),
@@ -73,8 +118,20 @@ export async function mount(root, ctx) {
   // The draft of this form from before a reload (same dataset only); each part is used once.
   const saved = loadDraft();
   const draft = saved && saved.datasetId === state.datasetId ? saved : null;
+  if (draft?.sweep && typeof draft.sweep === "object" && Array.isArray(draft.sweep.rows)) {
+    state.sweep = { ...state.sweep, ...draft.sweep, rows: draft.sweep.rows.filter((r) => r && typeof r.key === "string") };
+  }
+  if (state.mode !== "single" && state.chosen.size > 1) state.chosen = new Set([[...state.chosen][0]]);
 
-  root.append(pageHead({ title: "New run", sub: "Pick data and estimators, set up the table, and watch the map adapt live." }));
+  const modeButtons = MODES.map((m) => h("button", { type: "button", "data-mode": m.value, "aria-pressed": String(m.value === state.mode),
+    onclick: () => setMode(m.value) }, m.label));
+  const head = pageHead({
+    title: MODES.find((m) => m.value === state.mode).title,
+    sub: "Pick data and estimators, set up the table, and watch the map adapt live — or sweep settings, or run a fleet.",
+    actions: datasets.length ? [h("div", { class: "seg mode-switch", role: "group", "aria-label": "What to start" }, modeButtons)] : [],
+  });
+  const heading = head.querySelector(SEL.pageTitle);
+  root.append(head);
   if (!datasets.length) {
     root.append(card({ title: "No data yet", body: h("p", {}, "Upload a log or simulate a scenario first. ",
       h("a", { href: "/datasets" }, "Go to Datasets →")) }));
@@ -91,11 +148,14 @@ export async function mount(root, ctx) {
   const submit = h("button", { type: "submit", class: "primary", "data-start": "" }, icon(ICONS.play), "Start run");
   const formError = h("div", { class: "banner error", "data-form-error": "", hidden: true });
   const tableSection = h("div", { "data-table-section": "" });
+  const sweepHost = h("div", { "data-sweep-form": "" });
 
   const section = (n, label, body, id) =>
     h("section", { class: "card", "aria-labelledby": id, "data-section": id },
       h("div", { class: "card-head" }, h("h2", { id, class: "section-title" }, h("span", { class: "n", "aria-hidden": "true" }, String(n)), label)),
       h("div", { class: "card-body" }, body));
+  const sweepSection = section(6, "Sweep parameters", sweepHost, "sec-sweep");
+  const optionsSection = section(6, "Run options", optionsHost, "sec-options");
 
   form.append(
     h("div", { class: "stack" },
@@ -104,7 +164,8 @@ export async function mount(root, ctx) {
       section(3, "Signals", signalsHost, "sec-signals"),
       tableSection,
       section(5, "Configuration", configHost, "sec-config"),
-      section(6, "Run options", optionsHost, "sec-options"),
+      sweepSection,
+      optionsSection,
       formError,
       h("div", { class: "form-actions" }, h("a", { class: "button", href: "/datasets" }, "Cancel"), submit)),
   );
@@ -118,7 +179,13 @@ export async function mount(root, ctx) {
   const dsSelect = h("select", { id: "run-dataset", name: "dataset_id" },
     datasets.map((d) => h("option", { value: String(d.id), selected: d.id === state.datasetId }, `#${d.id} ${d.name} (${d.source})`)));
   const dsInfo = h("div", { class: "help" });
-  datasetHost.append(h("div", { class: "field" }, h("label", { for: "run-dataset" }, "Dataset"), dsSelect, dsInfo));
+  const dsLabel = h("label", { for: "run-dataset" }, "Dataset");
+  const batchList = h("div", { class: "batch-datasets" });
+  const batchHost = h("div", { class: "field", "data-batch-datasets": "", "data-field": "dataset_ids", role: "group",
+    "aria-labelledby": "batch-datasets-label" },
+  h("div", { class: "label", id: "batch-datasets-label" }, "Datasets of the batch — one run each, merged into one map"),
+  batchList);
+  datasetHost.append(h("div", { class: "field" }, dsLabel, dsSelect, dsInfo), batchHost);
   dsSelect.addEventListener("change", async () => {
     state.datasetId = Number(dsSelect.value);
     state.signals = {};
@@ -128,6 +195,7 @@ export async function mount(root, ctx) {
   });
 
   async function loadDataset() {
+    state.loading = true;
     state.dataset = datasets.find((d) => d.id === state.datasetId) ?? (await api.get(`/api/datasets/${state.datasetId}`));
     const d = state.dataset;
     dsInfo.textContent = `${fmtInt(d.rows)} rows at ${fmt(d.rate_hz, 3)} Hz (${fmtDuration(d.duration_s)}); channels: ` +
@@ -139,6 +207,7 @@ export async function mount(root, ctx) {
         (catalog.some((e) => e.name === "skf") ? "skf" : catalog[0]?.name);
       if (first) state.chosen.add(first);
     }
+    state.loading = false;
     renderEstimators();
     renderAll();
   }
@@ -150,15 +219,20 @@ export async function mount(root, ctx) {
     const other = catalog.filter((e) => !KIND_TITLES[e.kind]);
     if (other.length) groups.push(["Other", other]);
     estHost.replaceChildren(
-      h("p", { class: "help", style: { marginTop: 0 } }, "Tick several to run the same data through each and compare them."),
+      h("p", { class: "help", style: { marginTop: 0 } }, state.mode === "single"
+        ? "Tick several to run the same data through each and compare them."
+        : `A ${state.mode === "sweep" ? "sweep" : "batch"} runs one estimator: pick it.`),
       ...groups.filter(([, list]) => list.length).map(([label, list]) =>
         h("fieldset", { style: { border: 0, padding: 0, margin: "0 0 12px" } },
           h("legend", { style: { padding: 0, marginBottom: "8px" } }, h("h3", {}, label)),
           h("div", { class: "est-grid" }, list.map((e) =>
             h("label", { class: `est${suggested.has(e.name) ? " suggested" : ""}`, for: `est-${e.name}`, dataset: { estimator: e.name } },
-              h("input", { type: "checkbox", id: `est-${e.name}`, name: "estimator", value: e.name, checked: state.chosen.has(e.name),
+              h("input", { type: state.mode === "single" ? "checkbox" : "radio", id: `est-${e.name}`, name: "estimator", value: e.name,
+                checked: state.chosen.has(e.name),
                 onchange: (ev) => {
-                  if (ev.target.checked) state.chosen.add(e.name);
+                  // A sweep or batch runs one estimator: the boxes become radio buttons.
+                  if (state.mode !== "single") state.chosen = new Set([e.name]);
+                  else if (ev.target.checked) state.chosen.add(e.name);
                   else state.chosen.delete(e.name);
                   renderAll();
                   syncUrl();
@@ -257,7 +331,267 @@ export async function mount(root, ctx) {
       panel.hidden = e.name !== state.tab;
       return panel;
     }));
-    submit.replaceChildren(icon(ICONS.play), ests.length > 1 ? `Start ${ests.length} runs` : "Start run");
+    updateSubmit();
+  }
+
+  function updateSubmit() {
+    const n = selectedEstimators().length;
+    let text = n > 1 ? `Start ${n} runs` : "Start run";
+    if (state.mode === "sweep") {
+      const size = sweepSize().n;
+      text = size ? `Start sweep (${size} run${size === 1 ? "" : "s"})` : "Start sweep";
+    } else if (state.mode === "batch") {
+      text = state.batch.size ? `Start batch (${state.batch.size} datasets)` : "Start batch";
+    }
+    submit.replaceChildren(icon(ICONS.play), text);
+  }
+
+  /* ---------- mode: single run, sweep or batch ---------- */
+  function setMode(mode) {
+    if (mode === state.mode) return;
+    state.mode = mode;
+    for (const b of modeButtons) b.setAttribute("aria-pressed", String(b.dataset.mode === mode));
+    heading.textContent = MODES.find((m) => m.value === mode).title;
+    if (mode !== "single" && state.chosen.size > 1) {
+      state.chosen = new Set([state.chosen.has(state.tab) ? state.tab : [...state.chosen][0]]);
+    }
+    if (mode === "batch" && !state.batch.size && state.datasetId) state.batch.add(state.datasetId);
+    syncUrl();
+    // While the dataset (and its preview, which the grid is fitted to) loads, the form is not
+    // drawn yet: the end of loadDataset draws it in the new mode.
+    if (state.loading) return;
+    clearErrors(form);
+    renderEstimators();
+    renderAll();
+    saveDraft();
+  }
+
+  /* ---------- batch: the datasets ---------- */
+  function renderBatch() {
+    const on = state.mode === "batch";
+    batchHost.hidden = !on;
+    dsLabel.textContent = on ? "Channels, signals and grid from" : "Dataset";
+    if (!on) return;
+    batchList.replaceChildren(...datasets.map((d) => h("div", { class: "field" },
+      h("label", { class: "check", for: `batch-ds-${d.id}` },
+        h("input", { type: "checkbox", id: `batch-ds-${d.id}`, value: String(d.id), "data-batch-dataset": "", checked: state.batch.has(d.id),
+          onchange: (e) => {
+            if (e.target.checked) state.batch.add(d.id);
+            else state.batch.delete(d.id);
+            syncUrl();
+            updateSubmit();
+          } }),
+        h("span", {}, `#${d.id} ${d.name}`, h("span", { class: "sub" }, ` · ${fmtInt(d.rows)} rows`))))));
+  }
+
+  /** The datasets of the batch (by id); each checkbox is tagged with its place so "dataset_ids[k]" errors find it. */
+  function readBatch() {
+    const ids = datasets.filter((d) => state.batch.has(d.id)).map((d) => d.id).sort((a, b) => a - b);
+    for (const el of batchList.querySelectorAll("[data-batch-dataset]")) el.removeAttribute("data-field");
+    ids.forEach((dsId, k) => batchList.querySelector(SELECT.id(`batch-ds-${dsId}`))?.setAttribute("data-field", `dataset_ids.${k}`));
+    if (ids.length < 2) throw fieldError("dataset_ids", "Pick at least two datasets: a batch merges several vehicles' maps.");
+    return ids;
+  }
+
+  /* ---------- sweep: the parameters ---------- */
+  function sweepKeys(est) {
+    const hide = new Set([...FROM_ELSEWHERE, ...rolesOf(est).flatMap((r) => [r.role, `${r.role}_channel`])]);
+    return sweepableKeys(est.config_schema ?? {}, { hide });
+  }
+
+  const metricsFor = (est) => SWEEP_METRICS[est?.kind] ?? ["output_rmse", "rmse"];
+
+  function newRow(keys) {
+    const used = new Set(state.sweep.rows.map((r) => r.key));
+    const free = keys.filter((k) => !used.has(k.key));
+    const pick = SWEEP_FIRST.map((name) => free.find((k) => k.key === name)).find(Boolean) ?? free[0] ?? keys[0];
+    return { key: pick.key, kind: "values", values: "", min: "", max: "", scale: "linear", integer: false };
+  }
+
+  /** How many runs the sweep will start (null while a range waits for a sample size) and why. */
+  function sweepSize() {
+    const sw = state.sweep;
+    const samples = Number(sw.samples);
+    if (String(sw.samples ?? "").trim() && Number.isInteger(samples) && samples > 0) {
+      return { n: samples, text: `${samples} runs: random draws from the values and ranges (seed ${sw.seed || 0}).` };
+    }
+    if (!sw.rows.length) return { n: 0, text: "Add a parameter to sweep." };
+    if (sw.rows.some((r) => r.kind === "range")) return { n: null, text: "A range is drawn from: give the number of samples." };
+    const sizes = sw.rows.map((r) => String(r.values ?? "").split(/[\s,;]+/).filter(Boolean).length);
+    const n = sizes.reduce((a, b) => a * b, 1);
+    return { n, text: `${n} run${n === 1 ? "" : "s"}: the grid of ${sizes.join(" × ")} value${n === 1 ? "" : "s"}.` };
+  }
+
+  function renderSweep() {
+    const on = state.mode === "sweep";
+    sweepSection.hidden = !on;
+    optionsSection.querySelector(".n").textContent = on ? "7" : "6";
+    if (!on) return;
+    const est = selectedEstimators()[0];
+    const sw = state.sweep;
+    if (!est) return sweepHost.replaceChildren(h("p", { class: "help" }, "Pick an estimator first."));
+    const keys = sweepKeys(est);
+    if (!keys.length) return sweepHost.replaceChildren(h("p", { class: "help" }, `${est.name} has no numeric settings to sweep.`));
+    if (sw.estimator !== est.name) {
+      sw.rows = sw.rows.filter((r) => keys.some((k) => k.key === r.key));
+      if (!metricsFor(est).includes(sw.metric)) {
+        sw.metric = metricsFor(est)[0];
+        sw.order = HIGHER_BETTER.has(sw.metric) ? "max" : "min";
+      }
+      sw.estimator = est.name;
+    }
+    if (!sw.rows.length) sw.rows.push(newRow(keys));
+    const count = h("p", { class: "sweep-count", "data-sweep-count": "", "aria-live": "polite" });
+    const refresh = () => {
+      count.textContent = sweepSize().text;
+      updateSubmit();
+    };
+    const rows = sw.rows.map((row, k) => {
+      const info = keys.find((x) => x.key === row.key) ?? keys[0];
+      row.key = info.key;
+      if (info.type === "enum") row.kind = "values";
+      const field = `parameters.${row.key}`;
+      const param = h("select", { id: `sweep-param-${k}`, onchange: (e) => {
+        row.key = e.target.value;
+        renderSweep();
+        sweepHost.querySelector(SELECT.id(`sweep-param-${k}`))?.focus();
+      } }, keys.map((x) => h("option", { value: x.key, selected: x.key === row.key }, `${x.label} · ${x.key}`)));
+      const kind = h("select", { id: `sweep-kind-${k}`, disabled: info.type === "enum", onchange: (e) => {
+        row.kind = e.target.value;
+        renderSweep();
+        sweepHost.querySelector(SELECT.id(`sweep-kind-${k}`))?.focus();
+      } },
+      h("option", { value: "values", selected: row.kind !== "range" }, "Values"),
+      h("option", { value: "range", selected: row.kind === "range" }, "Range (random)"));
+      const def = defaultAt(est.defaults, row.key);
+      const about = [info.bounds, def !== undefined && def !== null && typeof def !== "object" ? `default ${def}` : ""].filter(Boolean).join(" · ");
+      const set = (prop) => (e) => {
+        row[prop] = e.target.type === "checkbox" ? e.target.checked : e.target.value;
+        refresh();
+      };
+      let values;
+      if (row.kind === "range") {
+        const num = (prop, label, extra = {}) => h("div", { class: "field" },
+          h("label", { for: `sweep-${prop}-${k}` }, label),
+          h("input", { type: "number", step: "any", id: `sweep-${prop}-${k}`, name: `${field}.${prop}`, value: row[prop] ?? "",
+            autocomplete: "off", oninput: set(prop), ...extra }));
+        values = h("div", {},
+          h("div", { class: "sweep-range" },
+            num("min", "Min", { "data-field": field }),
+            num("max", "Max"),
+            h("div", { class: "field" }, h("label", { for: `sweep-scale-${k}` }, "Scale"),
+              h("select", { id: `sweep-scale-${k}`, name: `${field}.scale`, onchange: set("scale") },
+                h("option", { value: "linear", selected: row.scale !== "log" }, "linear"),
+                h("option", { value: "log", selected: row.scale === "log" }, "log"))),
+            h("label", { class: "check", for: `sweep-integer-${k}` },
+              h("input", { type: "checkbox", id: `sweep-integer-${k}`, name: `${field}.integer`,
+                checked: row.integer || info.type === "integer", disabled: info.type === "integer", onchange: set("integer") }),
+              "integers")),
+          about ? h("div", { class: "help" }, about) : null);
+      } else {
+        values = h("div", { class: "field" },
+          h("label", { for: `sweep-values-${k}` }, "Values"),
+          h("input", { type: "text", id: `sweep-values-${k}`, name: field, class: "mono", value: row.values ?? "", autocomplete: "off",
+            inputmode: info.type === "enum" ? null : "decimal", oninput: set("values"),
+            placeholder: info.type === "enum" ? info.options.join(", ") : "e.g. 0.5, 1, 2" }),
+          h("div", { class: "help" }, info.type === "enum" ? `one or more of ${info.options.join(", ")}` : "comma-separated", about ? ` · ${about}` : ""));
+      }
+      return h("div", { class: "sweep-param", "data-sweep-row": k },
+        h("div", { class: "field" }, h("label", { for: `sweep-param-${k}` }, "Parameter"), param),
+        h("div", { class: "field" }, h("label", { for: `sweep-kind-${k}` }, "Give"), kind),
+        values,
+        h("button", { type: "button", class: "ghost icon", "aria-label": `Remove parameter ${k + 1}`, style: { marginTop: "22px" },
+          onclick: () => {
+            sw.rows.splice(k, 1);
+            if (!sw.rows.length) sw.rows.push(newRow(keys));
+            renderSweep();
+            sweepHost.querySelector("[data-add-sweep-param]")?.focus();
+          } }, icon(ICONS.x)));
+    });
+    const metrics = metricsFor(est);
+    const metricSelect = h("select", { id: "sweep-metric", name: "metric", onchange: (e) => {
+      sw.metric = e.target.value;
+      sw.order = HIGHER_BETTER.has(sw.metric) ? "max" : "min";
+      orderSelect.value = sw.order;
+    } }, metrics.map((m) => h("option", { value: m, selected: m === sw.metric }, `${metricLabel(m)} (${m})`)));
+    const orderSelect = h("select", { id: "sweep-order", name: "order", onchange: (e) => { sw.order = e.target.value; } },
+      h("option", { value: "min", selected: sw.order !== "max" }, "Lowest first"),
+      h("option", { value: "max", selected: sw.order === "max" }, "Highest first"));
+    const all = keys.length <= sw.rows.length;
+    sweepHost.replaceChildren(
+      h("p", { class: "help", style: { marginTop: 0 } },
+        "Every other setting is taken from the configuration above. Values make a grid (every combination); ",
+        "ranges are drawn from at random — give the number of samples."),
+      h("div", { class: "field", "data-field": "parameters" }, rows),
+      h("button", { type: "button", class: "small", "data-add-sweep-param": "", disabled: all,
+        onclick: () => {
+          sw.rows.push(newRow(keys));
+          renderSweep();
+          sweepHost.querySelector(SELECT.id(`sweep-param-${sw.rows.length - 1}`))?.focus();
+        } }, icon(ICONS.plus), "Add parameter"),
+      count,
+      h("div", { class: "fields" },
+        h("div", { class: "field" }, h("label", { for: "sweep-samples" }, "Samples"),
+          h("input", { type: "number", id: "sweep-samples", name: "samples", min: "1", step: "1", value: sw.samples ?? "",
+            placeholder: "the full grid", autocomplete: "off", oninput: (e) => { sw.samples = e.target.value; refresh(); } }),
+          h("div", { class: "help" }, "Random draws; empty: every combination of the values.")),
+        h("div", { class: "field" }, h("label", { for: "sweep-seed" }, "Seed"),
+          h("input", { type: "number", id: "sweep-seed", name: "seed", min: "0", step: "1", value: sw.seed ?? "0", autocomplete: "off",
+            oninput: (e) => { sw.seed = e.target.value; refresh(); } })),
+        h("div", { class: "field" }, h("label", { for: "sweep-metric" }, "Rank by"), metricSelect),
+        h("div", { class: "field" }, h("label", { for: "sweep-order" }, "Best"), orderSelect)),
+    );
+    refresh();
+  }
+
+  /** The sweep part of the request: parameters, sample size and seed, metric and order. */
+  function readSweep(est) {
+    const keys = sweepKeys(est);
+    const sw = state.sweep;
+    const parameters = {};
+    for (const row of sw.rows) {
+      const info = keys.find((x) => x.key === row.key);
+      const field = `parameters.${row.key}`;
+      if (!info) throw fieldError(field, `${row.key} is not a setting of ${est.name}.`);
+      if (row.key in parameters) throw fieldError(field, `${row.key} is swept twice: remove one of its rows.`);
+      if (row.kind === "range") {
+        const num = (prop) => {
+          const raw = String(row[prop] ?? "").trim();
+          const v = Number(raw);
+          if (!raw || !Number.isFinite(v)) throw fieldError(`${field}.${prop}`, `Give the ${prop} of the range.`);
+          return v;
+        };
+        parameters[row.key] = { min: num("min"), max: num("max"), scale: row.scale === "log" ? "log" : "linear",
+          integer: Boolean(row.integer) || info.type === "integer" };
+      } else {
+        const raw = String(row.values ?? "").trim();
+        if (!raw) throw fieldError(field, "Give the values to try, e.g. 0.5, 1, 2.");
+        if (info.type === "enum") {
+          parameters[row.key] = raw.split(/[\s,;]+/).filter(Boolean).map((v) => info.options.find((o) => String(o) === v) ?? v);
+        } else {
+          try {
+            parameters[row.key] = parseNumberList(raw);
+          } catch (err) {
+            throw fieldError(field, err.message);
+          }
+        }
+      }
+    }
+    if (!Object.keys(parameters).length) throw fieldError("parameters", "Add a parameter to sweep.");
+    const out = { parameters, metric: sw.metric || metricsFor(est)[0], order: sw.order === "max" ? "max" : "min" };
+    const samples = String(sw.samples ?? "").trim();
+    if (samples) {
+      const n = Number(samples);
+      if (!Number.isInteger(n) || n < 1) throw fieldError("samples", "Give a whole number of samples (at least 1), or leave it empty for the grid.");
+      out.samples = n;
+    }
+    const seed = String(sw.seed ?? "").trim();
+    if (seed) {
+      const n = Number(seed);
+      if (!Number.isInteger(n) || n < 0) throw fieldError("seed", "The seed is a whole number ≥ 0.");
+      out.seed = n;
+    }
+    return out;
   }
 
   function selectTab(name, focus = false) {
@@ -341,10 +675,13 @@ export async function mount(root, ctx) {
   );
 
   function renderAll() {
+    renderBatch();
     renderSignals();
     renderTable();
     renderConfig();
+    renderSweep();
     renderGates();
+    updateSubmit();
   }
 
   function syncUrl() {
@@ -353,6 +690,8 @@ export async function mount(root, ctx) {
     if (sig) query.signals = sig;
     const axes = state.grid ? state.grid.snapshot().axes.map((a) => a.name) : state.axes;
     if (axes.length) query.axes = axes.join(",");
+    if (state.mode !== "single") query.mode = state.mode;
+    if (state.mode === "batch" && state.batch.size) query.datasets = [...state.batch].sort((a, b) => a - b).join(",");
     ctx.setQuery(query);
   }
 
@@ -367,6 +706,7 @@ export async function mount(root, ctx) {
       options: controlValues(optionsHost),
       gates: gates.map((g) => ({ ...g })),
       tab: state.tab,
+      sweep: state.sweep,
     };
   }
 
@@ -426,6 +766,10 @@ export async function mount(root, ctx) {
       showError(form, { message: "Pick at least one estimator.", field: "estimator" });
       return;
     }
+    if (state.mode !== "single") {
+      await submitGroup(ests[0]);
+      return;
+    }
     // Check every form before the first POST: all problems at once, each next to its field.
     const problems = [];
     let shared = null;
@@ -476,6 +820,57 @@ export async function mount(root, ctx) {
     if (created.length === 1) ctx.navigate(`/runs/${created[0].run.id}`);
     else ctx.navigate(`/compare?runs=${created.map((c) => c.run.id).join(",")}`);
   });
+
+  /** Start a sweep or a batch: every part checked first, then one POST; on to its page. */
+  async function submitGroup(est) {
+    const problems = [];
+    let body = null;
+    let extra = null;
+    try {
+      body = bodyFor(est, { options: serviceOptions(), grid: needsTable(est) ? state.grid?.read() : null });
+    } catch (err) {
+      problems.push({ err, estimator: est.name });
+    }
+    if (body?.base_map_id) {
+      problems.push({ err: fieldError("base_map_id", "Sweeps and batches start from a constant θ0 or typed start values, not a base map."),
+        estimator: null });
+    }
+    try {
+      extra = state.mode === "sweep" ? readSweep(est) : readBatch();
+    } catch (err) {
+      problems.push({ err, estimator: null });
+    }
+    if (problems.length) {
+      reportErrors(problems);
+      return;
+    }
+    const { base_map_id: _base, dataset_id: datasetId, ...common } = body;
+    let path;
+    let payload;
+    if (state.mode === "sweep") {
+      // A swept setting comes from its parameter, not the fixed configuration.
+      for (const key of Object.keys(extra.parameters)) dropKey(common.config, key);
+      path = "/api/sweeps";
+      payload = { dataset_id: datasetId, ...common, ...extra };
+    } else {
+      path = "/api/batches";
+      payload = { dataset_ids: extra, ...common };
+    }
+    submit.disabled = true;
+    let group;
+    try {
+      group = await api.post(path, payload);
+    } catch (err) {
+      submit.disabled = false;
+      if (err.name === "AbortError") return;
+      reportErrors([{ err, estimator: est.name }]);
+      return;
+    }
+    submit.disabled = false;
+    sessionStorage.removeItem(STORAGE.newRunDraft);
+    window.removeEventListener("pagehide", saveDraft);
+    ctx.navigate(`/${state.mode === "sweep" ? "sweeps" : "batches"}/${group.id}`);
+  }
 
   /**
    * Show every problem next to its field. Estimators with a config problem get their tab marked;

@@ -22,7 +22,11 @@ def test_the_dashboard_is_installed() -> None:
     assert (frontend / "css" / "app.css").is_file()
 
 
-@pytest.mark.parametrize("route", ["/datasets", "/runs/new", "/runs/12", "/compare", "/versions"])
+@pytest.mark.parametrize(
+    "route",
+    ["/datasets", "/runs/new", "/runs/12", "/compare", "/versions", "/sweeps", "/sweeps/3",
+     "/batches", "/batches/4"],
+)  # fmt: skip
 def test_view_routes_serve_the_page_with_hashed_assets(client: TestClient, route: str) -> None:
     response = client.get(route)
     assert response.status_code == 200
