@@ -85,9 +85,11 @@ def create_app(settings: Settings | None = None, *, execute_runs: bool = True) -
             executor.start(asyncio.get_running_loop())
         elif executor is not None:  # connecting to a scheduler blocks: not on the loop
             await asyncio.to_thread(executor.start, asyncio.get_running_loop())
+        app.state.services.loop_lag.start()
         try:
             yield
         finally:
+            await app.state.services.loop_lag.stop()
             if executor is not None:
                 await asyncio.to_thread(executor.shutdown)
             db.dispose()

@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Annotated
 
 from fastapi import Depends, Path, Request
 from starlette.requests import HTTPConnection
 
+from app.api.loop_lag import LoopLag
 from app.config import Settings
 from app.db.engine import Database
 from app.errors import UnauthorizedError
@@ -32,6 +33,7 @@ class Services:
     base_maps: BaseMapService
     tokens: TokenService
     revision: str | None = None
+    loop_lag: LoopLag = field(default_factory=LoopLag)
 
 
 def get_services(connection: HTTPConnection) -> Services:

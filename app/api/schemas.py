@@ -47,6 +47,9 @@ class HealthOut(BaseModel):
     version: str
     auth_required: bool
     workers: int
+    loop_lag_ms: float = Field(
+        description="Worst lateness of the event loop over the last 30 s, in milliseconds."
+    )
 
 
 class ChannelOut(BaseModel):

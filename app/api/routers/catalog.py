@@ -32,6 +32,7 @@ def health(services: ServicesDep) -> HealthOut:
         version=_version(),
         auth_required=services.settings.auth_required,
         workers=services.settings.run_workers,
+        loop_lag_ms=services.loop_lag.max_ms(),
     )
 
 

@@ -1,6 +1,7 @@
 """Hostile uploads against a real ``mapwise serve`` (uvicorn), on SQLite and PostgreSQL: each
 gets a 400/413/415/422, nothing is stored, the server's memory grows by at most 64 MB over
-the whole corpus, and the event loop keeps answering (health requests polled throughout).
+the whole corpus, and the event loop is never late by more than 100 ms (the server's own
+lag monitor, reported by /api/health) while health requests are answered throughout.
 
 The corpus: a lying ``Content-Length``, 10 000 multipart parts, a 10 MB text field, a
 ReDoS-shaped ``Content-Type``, a 1 GB file streamed without a length, a truncated MCAP, an
@@ -132,7 +133,10 @@ def test_hostile_uploads_are_refused_cheaply_and_store_nothing(server: Server) -
         "MCAP decompression bomb": ("POST", {"files": {"file": ("c.mcap", _mcap(bomb=True))}}),
     }
     with httpx.Client(timeout=120) as client:
-        client.get(f"{server.base}/api/health").raise_for_status()
+        deadline = time.monotonic() + 60
+        while client.get(f"{server.base}/api/health").json()["loop_lag_ms"] > 100:
+            assert time.monotonic() < deadline, "the start-up lag never aged out"
+            time.sleep(1.0)  # start-up (the run pool spawning) leaves the 30 s window
         before_rows = client.get(url, params={"limit": 1}).json()["total"]
         rss0 = _rss_mb(server.process.pid)
         poller.start()
@@ -148,6 +152,7 @@ def test_hostile_uploads_are_refused_cheaply_and_store_nothing(server: Server) -
         stop.set()
         poller.join(timeout=30)
         rss1 = _rss_mb(server.process.pid)
+        loop_lag_ms = client.get(f"{server.base}/api/health").json()["loop_lag_ms"]
         assert client.get(url, params={"limit": 1}).json()["total"] == before_rows
     expected = {
         "lying Content-Length": 413,
@@ -163,6 +168,5 @@ def test_hostile_uploads_are_refused_cheaply_and_store_nothing(server: Server) -
         statuses["1 GB streamed file"] = 413
     assert statuses == expected
     assert rss1 - rss0 <= 64, f"server memory grew {rss1 - rss0:.0f} MB"
-    lags.sort()
-    assert lags, "the poller never got an answer"
-    assert lags[int(0.99 * (len(lags) - 1))] <= 0.25, f"health p99 {lags[-1] * 1000:.0f} ms"
+    assert loop_lag_ms <= 100, f"the event loop stalled {loop_lag_ms} ms"
+    assert lags, "the poller never got an answer"  # and the loop kept answering

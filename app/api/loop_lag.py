@@ -1,0 +1,41 @@
+"""How late the event loop runs its callbacks: the measure of "the event loop only moves
+bytes". A task sleeps ``interval_s`` again and again; each wake-up later than asked is lag
+(a handler computing on the loop, a blocking call). Health reports the worst lag of the last
+30 s, so a check (or a test) sees whether anything stalls the server."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import time
+from collections import deque
+
+
+class LoopLag:
+    def __init__(self, *, interval_s: float = 0.02, window_s: float = 30.0) -> None:
+        self.interval_s = interval_s
+        self.window_s = window_s
+        self._samples: deque[tuple[float, float]] = deque()
+        self._task: asyncio.Task[None] | None = None
+
+    def start(self) -> None:
+        self._task = asyncio.get_running_loop().create_task(self._run(), name="mapwise-loop-lag")
+
+    async def stop(self) -> None:
+        if self._task is not None:
+            self._task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._task
+
+    async def _run(self) -> None:
+        while True:
+            t0 = time.monotonic()
+            await asyncio.sleep(self.interval_s)
+            now = time.monotonic()
+            self._samples.append((now, max(0.0, now - t0 - self.interval_s)))
+            while self._samples and self._samples[0][0] < now - self.window_s:
+                self._samples.popleft()
+
+    def max_ms(self) -> float:
+        """The worst lag of the window, in milliseconds (0 before the first sample)."""
+        return round(1000.0 * max((lag for _, lag in self._samples), default=0.0), 1)
