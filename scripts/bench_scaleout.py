@@ -26,7 +26,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from scripts.bench_service import FUEL, SPEED, make_log  # noqa: E402
+from scripts.bench_service import make_log, run_body  # noqa: E402
 from tests.app.service.cluster import DaskCluster  # noqa: E402
 from tests.app.service.conftest import PgDatabases  # noqa: E402
 from tests.app.service.server import Server  # noqa: E402
@@ -36,17 +36,7 @@ SIGMA_V = [float(x) for x in np.geomspace(5, 100, 10)]
 
 
 def sweep(server: Server, dataset_id: int, timeout: float = 1800.0) -> dict[str, Any]:
-    body = {
-        "dataset_id": dataset_id,
-        "estimator": "skf",
-        "signals": {"y": "nox_ppm"},
-        "table": {
-            "axes": [
-                {"name": "speed_rpm", "breakpoints": SPEED},
-                {"name": "fuel_mg_per_stroke", "breakpoints": FUEL},
-            ]
-        },
-        "config": {"p0": 1e4},
+    body = run_body(dataset_id, p0=1e4) | {
         "parameters": {"sigma_w": SIGMA_W, "sigma_v": SIGMA_V},
         "metric": "output_rmse",
     }

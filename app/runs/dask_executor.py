@@ -19,14 +19,14 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-import threading
-from datetime import UTC, datetime, timedelta
+from datetime import UTC, datetime
 from typing import Any
 
 from app.config import Settings
 from app.db.engine import Database
 from app.db.repositories import RunRepo
 from app.runs.hub import LiveHub
+from app.runs.lost_runs import ExecutorBase
 from app.runs.worker import WorkerContext, database, execute_run
 
 log = logging.getLogger("mapwise.runs")
@@ -63,29 +63,14 @@ def execute_on_dask(run_id: int, context: WorkerContext, max_lost: int) -> str:
     return execute_run(run_id, context, publish)
 
 
-class DaskExecutor:
+class DaskExecutor(ExecutorBase):
     """Submits runs to the scheduler at ``settings.dask_address``; the same interface as
     :class:`app.runs.executor.RunExecutor` (start, submit, deliver_local, shutdown, sweep)."""
 
     def __init__(self, settings: Settings, db: Database, hub: LiveHub) -> None:
         assert settings.dask_address is not None
-        self.settings = settings
-        self.db = db
-        self.hub = hub
-        self.owner = dask_owner(settings.dask_address)
-        self.context = WorkerContext(
-            database_url=db.url,
-            live_fps=settings.live_fps,
-            series_points=settings.series_points,
-            cancel_poll_s=settings.cancel_poll_s,
-            version_fraction=settings.version_fraction,
-            owner=self.owner,
-            heartbeat_s=settings.heartbeat_s,
-        )
+        super().__init__(settings, db, hub, owner=dask_owner(settings.dask_address))
         self._client: Any = None
-        self._loop: asyncio.AbstractEventLoop | None = None
-        self._stopping = threading.Event()
-        self._sweeper: threading.Thread | None = None
 
     def start(self, loop: asyncio.AbstractEventLoop) -> None:
         from distributed import Client
@@ -100,8 +85,7 @@ class DaskExecutor:
             queued = RunRepo(s).ids_with_status("queued")
         for run_id in queued:  # submitted again: a claim lets only one execution through
             self.submit(run_id)
-        self._sweeper = threading.Thread(target=self._sweep_loop, name="mapwise-sweep", daemon=True)
-        self._sweeper.start()
+        self._start_sweeper()
 
     def submit(self, run_id: int) -> None:
         from distributed import fire_and_forget
@@ -118,51 +102,10 @@ class DaskExecutor:
         )
         fire_and_forget(future)
 
-    def sweep(self) -> list[int]:
-        """Runs of this cluster silent for ``heartbeat_timeout_s`` (the whole cluster was
-        restarted, say): re-queued and submitted again, or failed when poisoned."""
-        stale_before = datetime.now(UTC) - timedelta(seconds=self.settings.heartbeat_timeout_s)
-        with self.db.read() as s:
-            stale = RunRepo(s).stale_running(stale_before=stale_before)
-        lost = []
-        for run in stale:
-            with self.db.write() as s:
-                status = RunRepo(s).lose_attempt(
-                    run.id,
-                    reason="the run's worker stopped heartbeating",
-                    requeue=True,
-                    max_lost=self.settings.max_lost_attempts,
-                    attempt=run.attempt,
-                )
-            if status is None:
-                continue
-            lost.append(run.id)
-            self._deliver({"kind": "status", "run_id": run.id, "status": status, "error": None})
-            if status == "queued":
-                self.submit(run.id)
-        return lost
-
-    def _sweep_loop(self) -> None:
-        while not self._stopping.wait(self.settings.heartbeat_timeout_s / 2):
-            try:
-                self.sweep()
-            except Exception:
-                log.exception("the lost-run sweep failed")
-
     def _on_event(self, event: tuple[float, Any]) -> None:
         _, message = event
         if isinstance(message, dict) and "run_id" in message:
             self._deliver(message)
-
-    def _deliver(self, message: dict[str, Any]) -> None:
-        loop = self._loop
-        if loop is None or loop.is_closed():
-            return
-        with contextlib.suppress(RuntimeError):
-            loop.call_soon_threadsafe(self.hub.handle, message)
-
-    def deliver_local(self, message: dict[str, Any]) -> None:
-        self._deliver(message)
 
     def shutdown(self) -> None:
         """The runs keep executing on the cluster; only this process's client goes."""

@@ -16,7 +16,6 @@ another server's runs on a shared database are left alone.
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 import multiprocessing
 import os
@@ -25,7 +24,6 @@ import socket
 import threading
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
-from datetime import UTC, datetime, timedelta
 from functools import partial
 from pathlib import Path
 from typing import Any, Protocol
@@ -34,7 +32,8 @@ from app.config import Settings
 from app.db.engine import Database
 from app.db.repositories import RunRepo
 from app.runs.hub import LiveHub
-from app.runs.worker import WorkerContext, execute_in_pool, init_pool_worker, warm_up
+from app.runs.lost_runs import ExecutorBase
+from app.runs.worker import execute_in_pool, init_pool_worker, warm_up
 
 log = logging.getLogger("mapwise.runs")
 SHUTDOWN_WAIT_S = 15.0
@@ -68,31 +67,15 @@ def dead_local_owner(owner: str) -> bool:
     return _start_time(pid) != parts[3]
 
 
-class RunExecutor:
+class RunExecutor(ExecutorBase):
     def __init__(self, settings: Settings, db: Database, hub: LiveHub) -> None:
-        self.settings = settings
-        self.db = db
-        self.hub = hub
-        self.owner = local_owner()
-        self.context = WorkerContext(
-            database_url=db.url,
-            live_fps=settings.live_fps,
-            series_points=settings.series_points,
-            cancel_poll_s=settings.cancel_poll_s,
-            version_fraction=settings.version_fraction,
-            parent_pid=os.getpid(),
-            owner=self.owner,
-            heartbeat_s=settings.heartbeat_s,
-        )
+        super().__init__(settings, db, hub, owner=local_owner(), parent_pid=os.getpid())
         self._mp = multiprocessing.get_context("spawn")
         self._queue: Any = None
         self._pool: ProcessPoolExecutor | None = None
-        self._loop: asyncio.AbstractEventLoop | None = None
         self._pump: threading.Thread | None = None
-        self._stopping = threading.Event()
         self._lock = threading.Lock()
         self._futures: dict[int, Future[str]] = {}
-        self._sweeper: threading.Thread | None = None
 
     # -- lifecycle ----------------------------------------------------------------------------
 
@@ -114,8 +97,7 @@ class RunExecutor:
             queued = RunRepo(s).ids_with_status("queued")
         for run_id in queued:
             self.submit(run_id)
-        self._sweeper = threading.Thread(target=self._sweep_loop, name="mapwise-sweep", daemon=True)
-        self._sweeper.start()
+        self._start_sweeper()
 
     def _new_pool(self) -> ProcessPoolExecutor:
         pool = ProcessPoolExecutor(
@@ -216,44 +198,6 @@ class RunExecutor:
             return
         self.lose(run_id, None, "a run worker process died (killed or out of memory)")
 
-    def lose(self, run_id: int, attempt: int | None, reason: str) -> None:
-        """The run's live attempt died: interrupted, re-queued (and submitted) or failed."""
-        try:
-            with self.db.write() as s:
-                status = RunRepo(s).lose_attempt(
-                    run_id,
-                    reason=reason,
-                    requeue=self.settings.lost_run_policy == "requeue",
-                    max_lost=self.settings.max_lost_attempts,
-                    attempt=attempt,
-                )
-                error = RunRepo(s).get(run_id).error if status else None
-        except Exception:  # the database may be gone at shutdown
-            log.exception("run %s: could not record its lost attempt", run_id)
-            return
-        if status is None:
-            return
-        log.warning("run %s lost its attempt (%s): now %s", run_id, reason, status)
-        self._deliver({"kind": "status", "run_id": run_id, "status": status, "error": error})
-        if status == "queued" and not self._stopping.is_set():
-            self.submit(run_id)
-
-    def sweep(self) -> list[int]:
-        """Running attempts silent for ``heartbeat_timeout_s`` lost their worker."""
-        stale_before = datetime.now(UTC) - timedelta(seconds=self.settings.heartbeat_timeout_s)
-        with self.db.read() as s:
-            stale = RunRepo(s).stale_running(stale_before=stale_before)
-        for run in stale:
-            self.lose(run.id, run.attempt, "the run's worker stopped heartbeating")
-        return [r.id for r in stale]
-
-    def _sweep_loop(self) -> None:
-        while not self._stopping.wait(self.settings.heartbeat_timeout_s / 2):
-            try:
-                self.sweep()
-            except Exception:  # the database may be down for a while: sweep again later
-                log.exception("the lost-run sweep failed")
-
     # -- messages -------------------------------------------------------------------------------
 
     def _pump_messages(self) -> None:
@@ -265,17 +209,6 @@ class RunExecutor:
             except (EOFError, OSError):
                 return
             self._deliver(message)
-
-    def _deliver(self, message: dict[str, Any]) -> None:
-        loop = self._loop
-        if loop is None or loop.is_closed():
-            return
-        with contextlib.suppress(RuntimeError):  # the loop closed meanwhile
-            loop.call_soon_threadsafe(self.hub.handle, message)
-
-    def deliver_local(self, message: dict[str, Any]) -> None:
-        """A message from the API process itself (e.g. a queued run cancelled)."""
-        self._deliver(message)
 
 
 def make_executor(settings: Settings, db: Database, hub: LiveHub) -> Executor:

@@ -83,6 +83,25 @@ class Server:
             out += [int(x) for x in text]
         return out
 
+    def workers(self) -> list[int]:
+        """Process ids of the server's run workers (its spawned pool processes)."""
+        out = []
+        for pid in self.children():
+            try:
+                if b"spawn_main" in Path(f"/proc/{pid}/cmdline").read_bytes():
+                    out.append(pid)
+            except OSError:  # gone meanwhile
+                pass
+        return out
+
+    def wait_versions(self, run_id: int, n: int, timeout: float = 60.0) -> None:
+        """Until run ``run_id`` has persisted ``n`` map versions."""
+        deadline = time.monotonic() + timeout
+        while self.get(f"/api/runs/{run_id}")["n_versions"] < n:
+            if time.monotonic() > deadline:
+                raise AssertionError(f"run {run_id} has fewer than {n} versions: {self.output()}")
+            time.sleep(0.05)
+
     def kill(self) -> None:
         """``kill -9``: no shutdown handler runs."""
         self.process.send_signal(signal.SIGKILL)

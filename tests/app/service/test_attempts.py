@@ -14,7 +14,6 @@ import os
 import signal
 import time
 from datetime import UTC, datetime, timedelta
-from pathlib import Path
 from typing import Any
 
 import pytest
@@ -181,14 +180,6 @@ def test_owner_ids_tell_dead_local_processes() -> None:
     assert not dead_local_owner("dask:tcp://scheduler:8786")
 
 
-def _worker_of(server: Server) -> list[int]:
-    return [
-        pid
-        for pid in server.children()
-        if b"spawn_main" in Path(f"/proc/{pid}/cmdline").read_bytes()
-    ]
-
-
 def test_a_poison_run_fails_after_three_lost_attempts(backend: str, fresh_url) -> None:  # type: ignore[no-untyped-def]
     env = {"MAPWISE_LOST_RUN_POLICY": "requeue", "MAPWISE_MAX_LOST_ATTEMPTS": "3"}
     srv = Server(fresh_url(backend), workers=1, env=env)
@@ -197,12 +188,12 @@ def test_a_poison_run_fails_after_three_lost_attempts(backend: str, fresh_url) -
         run_id = int(start_run(srv.http, run_body(dataset["id"], pace=2))["id"])
         for attempt in (1, 2, 3):  # its worker is killed every time, as an OOM killer would
             deadline = time.monotonic() + 60
-            while srv.get(f"/api/runs/{run_id}")["attempt"] < attempt or not _worker_of(srv):
+            while srv.get(f"/api/runs/{run_id}")["attempt"] < attempt or not srv.workers():
                 assert time.monotonic() < deadline, srv.output()
                 time.sleep(0.05)
             srv.wait_run(run_id, ("running",))
             time.sleep(0.3)
-            for pid in _worker_of(srv):
+            for pid in srv.workers():
                 os.kill(pid, signal.SIGKILL)
             done = srv.wait_run(run_id, ("queued", "failed", "running"), timeout=60)
             if attempt < 3:

@@ -101,10 +101,7 @@ def test_a_killed_worker_mid_run_is_resumed_elsewhere_once(
         dataset = upload_ok(server.http, text)
         body = run_body(dataset["id"], pace=5, version_every={"samples": 500})  # 8 s
         run_id = int(start_run(server.http, body)["id"])
-        deadline = time.monotonic() + 60
-        while server.get(f"/api/runs/{run_id}")["n_versions"] < 2:
-            assert time.monotonic() < deadline, cluster.output()
-            time.sleep(0.05)
+        server.wait_versions(run_id, 2)
         address = cluster.worker_running(f"mapwise-run-{run_id}-")
         os.kill(cluster.worker_pids()[address], signal.SIGKILL)  # as the OOM killer would
         done = server.wait_run(run_id, TERMINAL, timeout=120)
@@ -135,10 +132,7 @@ def test_a_worker_killed_mid_sweep_loses_no_run_and_doubles_none(
         }
         sweep = server.http.post("/api/sweeps", json=body).json()
         victim = sweep["runs"][0]["id"]
-        deadline = time.monotonic() + 60
-        while server.get(f"/api/runs/{victim}")["n_versions"] < 1:
-            assert time.monotonic() < deadline, cluster.output()
-            time.sleep(0.05)
+        server.wait_versions(victim, 1)
         address = cluster.worker_running(f"mapwise-run-{victim}-")
         os.kill(cluster.worker_pids()[address], signal.SIGKILL)
         deadline = time.monotonic() + 180

@@ -45,10 +45,7 @@ def test_a_postgresql_restart_mid_run_is_survived(fresh_url, tmp_path: Any) -> N
         dataset = upload_ok(srv.http, text)
         body = run_body(dataset["id"], pace=5, version_every={"samples": 500})  # 8 s
         run_id = int(start_run(srv.http, body)["id"])
-        deadline = time.monotonic() + 60
-        while srv.get(f"/api/runs/{run_id}")["n_versions"] < 1:
-            assert time.monotonic() < deadline, srv.output()
-            time.sleep(0.05)
+        srv.wait_versions(run_id, 1)
         poller = threading.Thread(target=poll, daemon=True)
         poller.start()
         _restart_postgresql()

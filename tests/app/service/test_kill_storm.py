@@ -8,7 +8,6 @@ import os
 import random
 import signal
 import time
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -18,17 +17,6 @@ from tests.app.service.server import Server
 
 KILLS = 50
 RUNS = 12
-
-
-def _workers(server: Server) -> list[int]:
-    out = []
-    for pid in server.children():
-        try:
-            if b"spawn_main" in Path(f"/proc/{pid}/cmdline").read_bytes():
-                out.append(pid)
-        except OSError:
-            pass
-    return out
 
 
 def test_fifty_worker_kills_lose_and_double_nothing(backend: str, fresh_url, tmp_path: Any) -> None:  # type: ignore[no-untyped-def]
@@ -56,7 +44,7 @@ def test_fifty_worker_kills_lose_and_double_nothing(backend: str, fresh_url, tmp
                 time.sleep(rng.uniform(0.0, 0.4))  # anywhere in it: a chunk, a version write
             else:  # the others at any moment, start-up of the new pool included
                 time.sleep(rng.uniform(0.05, 1.0))
-            workers = _workers(server)
+            workers = server.workers()
             if not workers:
                 continue
             try:

@@ -169,10 +169,7 @@ def test_kill_9_mid_run_then_resume_gives_the_uninterrupted_map(
         assert first.wait_run(reference, ("succeeded", "failed"))["status"] == "succeeded"
         expected = first.get(f"/api/runs/{reference}/export", params={"format": "json"})
         run_id = _start(first, run_body(dataset, pace=10, version_every={"samples": 500}))
-        deadline = time.monotonic() + 60
-        while first.get(f"/api/runs/{run_id}")["n_versions"] < 3:
-            assert time.monotonic() < deadline, first.output()
-            time.sleep(0.05)
+        first.wait_versions(run_id, 3)
         workers = first.children()
         first.kill()
     except BaseException:
@@ -224,18 +221,13 @@ def test_empty_database_gets_schema_and_demo(backend: str, fresh_url) -> None:  
 def test_a_killed_worker_interrupts_its_runs_and_the_pool_recovers(server: Server) -> None:
     import os
     import signal
-    from pathlib import Path
 
     dataset = _upload(server, log_csv(3000, seed=33, rate_hz=100.0))  # 30 s of log
     running = [_start(server, run_body(dataset, pace=3)) for _ in range(2)]  # both workers
     for run_id in running:
         server.wait_run(run_id, ("running",))
     queued = _start(server, run_body(dataset))
-    workers = [
-        pid
-        for pid in server.children()
-        if b"spawn_main" in Path(f"/proc/{pid}/cmdline").read_bytes()
-    ]
+    workers = server.workers()
     assert len(workers) == 2
     os.kill(workers[0], signal.SIGKILL)  # as the OOM killer would
     for run_id in running:
