@@ -2,16 +2,20 @@
 it is a test, tests/app/service/test_load.py).
 
 ``--users`` concurrent users for ``--seconds``, each in a loop: upload a small CSV log, start
-a paced SKF run on it, watch its live stream for a few seconds, and read the lists and the
-run. Besides them, ``--streams`` long runs stream the whole time, each watched by a viewer
-from start to end (the soak's "8 streaming runs"). Then every run started is waited for.
+a paced SKF run on it, read the lists while watching its live stream to the end, read the
+run, pause (0.5–2 s) and begin again. Besides them, ``--streams`` long runs stream the whole
+time, each watched by a viewer from start to end (the soak's "8 streaming runs"). Then every
+run started is waited for.
 Reported: requests and requests/s, p50/p95/p99 latency, live frames/s delivered and their
 delay from the worker to the viewer, errors (any non-2xx or transport error), lost runs
 (started but not ``succeeded``) and, for a server started here, its memory growth between
 the first and the last minute.
 
     .venv/bin/python scripts/load.py [--url URL | --database-url URL] [--users 10]
-        [--streams 0] [--seconds 60] [--json]
+        [--streams 0] [--seconds 60] [--workers N] [--json]
+
+A server started here gets ``--workers`` run workers (default: ``--streams`` + 2, so that
+the long runs do not hold every worker).
 
 The soak of README: ``--users 20 --streams 8 --seconds 1800``.
 """
@@ -37,6 +41,8 @@ import websockets
 ROOT = Path(__file__).resolve().parents[1]
 U1 = [500.0, 1500.0, 2500.0, 3500.0]
 U2 = [0.0, 20.0, 40.0, 60.0]
+USER_WATCH_S = 60.0  # a user watches its run to the end, or this long
+THINK_S = (0.5, 2.0)  # a user's pause between one run and the next
 TERMINAL = ("succeeded", "failed", "cancelled", "interrupted")
 
 
@@ -121,10 +127,12 @@ async def user(base: str, index: int, until: float, tally: Tally, token: str | N
                 continue
             tally.runs.append(int(run["id"]))
             ws_url = f"{ws_base}/api/runs/{run['id']}/stream" + (f"?token={token}" if token else "")
-            watcher = asyncio.create_task(watch(ws_url, rng.uniform(1.0, 3.0), tally, {}))
-            for path in ("/api/runs?limit=20", "/api/datasets?limit=20", f"/api/runs/{run['id']}"):
+            watcher = asyncio.create_task(watch(ws_url, USER_WATCH_S, tally, {}))
+            for path in ("/api/runs?limit=20", "/api/datasets?limit=20"):
                 await tally.call(client, "GET", path)
             await watcher
+            await tally.call(client, "GET", f"/api/runs/{run['id']}")
+            await asyncio.sleep(rng.uniform(*THINK_S))
 
 
 async def streamer(base: str, index: int, until: float, tally: Tally, token: str | None) -> None:
@@ -251,6 +259,7 @@ def main() -> None:
     parser.add_argument("--users", type=int, default=10)
     parser.add_argument("--streams", type=int, default=0, help="long runs watched throughout")
     parser.add_argument("--seconds", type=float, default=60.0)
+    parser.add_argument("--workers", type=int, help="run workers of the server started here")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     server = None
@@ -259,7 +268,10 @@ def main() -> None:
         from tests.app.service.server import Server
 
         work = Path(tempfile.mkdtemp(prefix="mapwise-load-"))
-        server = Server(args.database_url or f"sqlite:///{work / 'load.db'}")
+        server = Server(
+            args.database_url or f"sqlite:///{work / 'load.db'}",
+            workers=args.workers or max(2, args.streams + 2),
+        )
         args.url = server.base
     try:
         result = run_load(

@@ -6,6 +6,6 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 python3 -m venv .venv
-.venv/bin/python -m pip install --quiet --upgrade pip
+.venv/bin/python -m pip install --quiet --upgrade pip "setuptools>=78.1.1"
 .venv/bin/python -m pip install --quiet -e .
 exec .venv/bin/mapwise serve "$@"

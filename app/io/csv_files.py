@@ -30,6 +30,7 @@ DELIMITERS = ",;\t"
 _HEADER_UNIT = re.compile(r"^\s*(?P<name>.+?)\s*\[(?P<unit>[^\]]*)\]\s*$")
 _DECIMAL_COMMA = re.compile(r"^\s*[+-]?\d+,\d+([eE][+-]?\d+)?\s*$")
 _DECIMAL_POINT = re.compile(r"\d\.\d")
+CHUNK_ROWS = 20_000
 
 
 class LogFormatError(InputError, SignalError):
@@ -123,10 +124,9 @@ def parse_csv(
             )
         header_units = [u.strip() or h for u, h in zip(rows[1], header_units, strict=True)]
         start = 2
+    body = [ln for _, ln in lines[start:]]
     lines_of_body = numbers[start:]
-    cells_by_column = _columns(
-        [ln for _, ln in lines[start:]], lines_of_body, delimiter, len(names)
-    )
+    del lines  # the body and its line numbers are all that is needed from here on
     unit_of = dict(zip(names, header_units, strict=True))
     for name, unit in (units or {}).items():
         if name not in unit_of:
@@ -136,8 +136,8 @@ def parse_csv(
             )
         unit_of[name] = str(unit)
     if decimal is None:
-        sample = [list(col[:20]) for col in cells_by_column]
-        decimal = sniff_decimal([list(r) for r in zip(*sample, strict=True)], delimiter)
+        head = _columns(body[:20], lines_of_body[:20], delimiter, len(names))
+        decimal = sniff_decimal([list(r) for r in zip(*head, strict=True)], delimiter)
     if time_column is None:
         time_column = next((c for c in TIME_COLUMNS if c in names), None)
     elif time_column not in names:
@@ -153,24 +153,18 @@ def parse_csv(
                 f"{', '.join(repr(c) for c in missing)}; the file has {names}",
                 field=missing[0],
             )
-    parsed: dict[str, np.ndarray] = {}
-    for j, name in enumerate(names):
-        if name == time_column or (wanted is not None and name not in wanted):
-            continue
-        must = strict or wanted is not None
-        values = _parse_column(
-            cells_by_column[j], lines_of_body, name, strict=must, decimal=decimal
-        )
-        if values is not None:
-            parsed[name] = values
-    if time_column is not None:
-        j = names.index(time_column)
-        time = _parse_column(
-            cells_by_column[j], lines_of_body, time_column, strict=True, decimal=decimal
-        )
-        assert time is not None
-    else:
-        time = np.arange(len(lines_of_body), dtype=np.float64)
+    must = {
+        name: name == time_column or strict or wanted is not None
+        for name in names
+        if name == time_column or wanted is None or name in wanted
+    }
+    values = _parse_body(body, lines_of_body, delimiter, names, must, decimal)
+    time = (
+        values.pop(time_column)
+        if time_column is not None
+        else np.arange(len(lines_of_body), dtype=np.float64)
+    )
+    parsed = {name: v for name, v in values.items() if v is not None}
     try:
         signals = Signals(time, parsed, unit_of)
     except SignalError as exc:
@@ -263,6 +257,33 @@ def _columns(body: list[str], lines: list[int], delimiter: str, width: int) -> l
         return [list(col) for col in zip(*rows, strict=True)]
     cells = joined.replace("\n", delimiter).split(delimiter)
     return [cells[j::width] for j in range(width)]
+
+
+def _parse_body(
+    body: list[str],
+    lines: list[int],
+    delimiter: str,
+    names: list[str],
+    must: Mapping[str, bool],
+    decimal: str,
+) -> dict[str, np.ndarray | None]:
+    """Floats of the columns in ``must`` (name → strict), converted :data:`CHUNK_ROWS` rows at
+    a time so that the cells held as Python strings stay a small part of the file; a
+    non-strict column that is not numeric throughout is ``None``."""
+    parts: dict[str, list[np.ndarray] | None] = {name: [] for name in must}
+    for lo in range(0, max(len(body), 1), CHUNK_ROWS):
+        chunk_lines = lines[lo : lo + CHUNK_ROWS]
+        cells = _columns(body[lo : lo + CHUNK_ROWS], chunk_lines, delimiter, len(names))
+        for j, name in enumerate(names):
+            kept = parts.get(name)
+            if kept is None:
+                continue
+            values = _parse_column(cells[j], chunk_lines, name, strict=must[name], decimal=decimal)
+            if values is None:
+                parts[name] = None
+            else:
+                kept.append(values)
+    return {name: None if kept is None else np.concatenate(kept) for name, kept in parts.items()}
 
 
 def _is_units_row(cells: list[str]) -> bool:

@@ -24,7 +24,7 @@ def test_concurrent_users_get_no_errors_and_lose_no_run(backend: str, fresh_url)
 def test_a_short_soak_with_streaming_runs(fresh_url) -> None:  # type: ignore[no-untyped-def]
     """The soak of README in short: users plus long runs streamed throughout; no error, no
     lost run, live frames reach their viewers within a second."""
-    server = Server(fresh_url("sqlite"))
+    server = Server(fresh_url("sqlite"), workers=4)  # the two long runs hold two workers
     try:
         result = run_load(
             server.base,
