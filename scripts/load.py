@@ -17,7 +17,9 @@ the first and the last minute.
 A server started here gets ``--workers`` run workers (default: ``--streams`` + 2, so that
 the long runs do not hold every worker).
 
-The soak of README: ``--users 20 --streams 8 --seconds 1800``.
+The soak of README: ``--users 20 --streams 8 --seconds 1800 --warmup 60``: latencies and
+frame delays are counted after the first minute (workers starting, first compilations), as
+locust's ``--reset-stats`` does after its ramp-up; errors and lost runs count throughout.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ import argparse
 import asyncio
 import json
 import random
+import re
 import statistics
 import sys
 import tempfile
@@ -74,6 +77,12 @@ class Tally:
     frame_delays: list[float] = field(default_factory=list)
     runs: list[int] = field(default_factory=list)
     cut: set[int] = field(default_factory=set)  # streaming runs cancelled at the end
+    by_route: dict[str, list[float]] = field(default_factory=dict)
+    measure_from: float = 0.0  # time.monotonic() after which latencies count (the warm-up)
+
+    @property
+    def measuring(self) -> bool:
+        return time.monotonic() >= self.measure_from
 
     async def call(self, client: httpx.AsyncClient, method: str, path: str, **kw: Any) -> Any:
         t0 = time.perf_counter()
@@ -82,7 +91,10 @@ class Tally:
         except httpx.HTTPError as exc:
             self.errors.append(f"{method} {path}: {exc!r}")
             return None
-        self.latencies.append(time.perf_counter() - t0)
+        if self.measuring:
+            self.latencies.append(time.perf_counter() - t0)
+            route = re.sub(r"/\d+", "/{id}", path.split("?")[0])
+            self.by_route.setdefault(f"{method} {route}", []).append(self.latencies[-1])
         if response.status_code >= 400:
             self.errors.append(f"{method} {path}: {response.status_code} {response.text[:200]}")
             return None
@@ -100,7 +112,7 @@ async def watch(ws_url: str, seconds: float, tally: Tally, headers: dict[str, st
                     return
                 if message["type"] in ("full", "delta"):
                     tally.frames += 1
-                if message.get("emitted_at"):
+                if message.get("emitted_at") and tally.measuring:
                     tally.frame_delays.append(time.time() - float(message["emitted_at"]))
                 if message["type"] == "status" and message["status"] in TERMINAL:
                     return
@@ -154,7 +166,9 @@ async def streamer(base: str, index: int, until: float, tally: Tally, token: str
             status = (await client.get(f"/api/runs/{run['id']}")).json()["status"]
             if status not in TERMINAL:  # the soak is over: cut the run (not a lost one)
                 tally.cut.add(int(run["id"]))
-                await tally.call(client, "POST", f"/api/runs/{run['id']}/cancel")
+                cancel = await client.post(f"/api/runs/{run['id']}/cancel")
+                if cancel.status_code not in (200, 202, 409):  # 409: it ended meanwhile
+                    tally.errors.append(f"cancel {run['id']}: {cancel.status_code}")
 
 
 def _rss_mb(pid: int) -> float:
@@ -202,8 +216,9 @@ def run_load(
     token: str | None = None,
     settle_s: float = 300.0,
     server_pid: int | None = None,
+    warmup_s: float = 0.0,
 ) -> dict[str, Any]:
-    tally = Tally()
+    tally = Tally(measure_from=time.monotonic() + warmup_s)
     memory: list[tuple[float, float]] = []
 
     async def main() -> list[int]:
@@ -218,16 +233,14 @@ def run_load(
     t0 = time.perf_counter()
     lost = asyncio.run(main())
     elapsed = time.perf_counter() - t0
-    lat = sorted(1000 * x for x in tally.latencies) or [float("nan")]
     delays = sorted(tally.frame_delays) or [float("nan")]
     return {
         "users": users,
         "seconds": seconds,
+        "warmup_s": warmup_s,
         "requests": len(tally.latencies),
-        "requests_per_s": round(len(tally.latencies) / seconds, 1),
-        "p50_ms": round(statistics.median(lat), 1),
-        "p95_ms": round(lat[int(0.95 * (len(lat) - 1))], 1),
-        "p99_ms": round(lat[int(0.99 * (len(lat) - 1))], 1),
+        "requests_per_s": round(len(tally.latencies) / max(seconds - warmup_s, 1e-9), 1),
+        **{k: v for k, v in _percentiles(tally.latencies).items() if k != "n"},
         "frames": tally.frames,
         "frames_per_s": round(tally.frames / seconds, 1),
         "frame_delay_p99_s": round(delays[int(0.99 * (len(delays) - 1))], 3),
@@ -235,9 +248,22 @@ def run_load(
         "memory_growth_pct": _growth(memory, seconds),
         "runs_started": len(tally.runs),
         "lost_runs": lost,
+        "by_route": {
+            route: _percentiles(values) for route, values in sorted(tally.by_route.items())
+        },
         "errors": tally.errors[:20],
         "error_count": len(tally.errors),
         "wall_s": round(elapsed, 1),
+    }
+
+
+def _percentiles(seconds: list[float]) -> dict[str, float]:
+    ms = sorted(1000 * x for x in seconds) or [float("nan")]
+    return {
+        "n": len(seconds),
+        "p50_ms": round(statistics.median(ms), 1),
+        "p95_ms": round(ms[int(0.95 * (len(ms) - 1))], 1),
+        "p99_ms": round(ms[int(0.99 * (len(ms) - 1))], 1),
     }
 
 
@@ -260,6 +286,12 @@ def main() -> None:
     parser.add_argument("--streams", type=int, default=0, help="long runs watched throughout")
     parser.add_argument("--seconds", type=float, default=60.0)
     parser.add_argument("--workers", type=int, help="run workers of the server started here")
+    parser.add_argument(
+        "--warmup",
+        type=float,
+        default=0.0,
+        help="seconds at the start whose latencies are not counted (errors always are)",
+    )
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     server = None
@@ -281,6 +313,7 @@ def main() -> None:
             streams=args.streams,
             token=args.token,
             server_pid=None if server is None else server.process.pid,
+            warmup_s=args.warmup,
         )
     finally:
         if server is not None:

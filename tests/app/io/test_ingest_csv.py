@@ -220,3 +220,23 @@ def test_spooled_upload_file_is_read_from_its_position() -> None:
         spooled.seek(0)
         ds = ingest(spooled)
     np.testing.assert_array_equal(ds.signals["x"], [1.0, 2.0, 4.0])
+
+
+def test_logs_longer_than_a_chunk_keep_line_numbers_and_column_rules() -> None:
+    """Logs are converted CHUNK_ROWS rows at a time: an error in a later chunk still names its
+    file line, and a column that turns non-numeric only there is still dropped (non-strict)
+    or refused (upload)."""
+    from app.io.csv_files import CHUNK_ROWS, parse_csv
+
+    n = 2 * CHUNK_ROWS + 7
+    rows = [f"{k * 0.01:.2f},{k},{k % 5}" for k in range(n)]
+    bad = CHUNK_ROWS + 123  # body index; file line = index + 3 (header, comment, 1-based)
+    rows[bad] = f"{bad * 0.01:.2f},{bad},oops"
+    text = "time [s],a [-],b [-]\n# a comment\n" + "\n".join(rows) + "\n"
+    log = parse_csv(text)
+    assert log.signals.names == ["a"]
+    np.testing.assert_array_equal(log.signals["a"], np.arange(n, dtype=float))
+    with pytest.raises(InputError) as info:
+        ingest(text.encode())
+    assert info.value.field == "b"
+    assert f"line {bad + 3}, column 'b': non-numeric value 'oops'" in info.value.message
