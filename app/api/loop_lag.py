@@ -1,12 +1,17 @@
 """How late the event loop runs its callbacks: the measure of "the event loop only moves
 bytes". A task sleeps ``interval_s`` again and again; each wake-up later than asked is lag
 (a handler computing on the loop, a blocking call). Health reports the worst lag of the last
-30 s, so a check (or a test) sees whether anything stalls the server."""
+30 s, so a check (or a test) sees whether anything stalls the server.
+
+The samples are written on the event loop and read by ``/api/health``, a sync route that
+runs in the thread pool: a lock keeps the reader from iterating a deque being trimmed
+("deque mutated during iteration" was a 500 from health)."""
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import threading
 import time
 from collections import deque
 
@@ -17,6 +22,7 @@ class LoopLag:
         self.window_s = window_s
         self._samples: deque[tuple[float, float]] = deque()
         self._task: asyncio.Task[None] | None = None
+        self._lock = threading.Lock()
 
     def start(self) -> None:
         self._task = asyncio.get_running_loop().create_task(self._run(), name="mapwise-loop-lag")
@@ -32,10 +38,13 @@ class LoopLag:
             t0 = time.monotonic()
             await asyncio.sleep(self.interval_s)
             now = time.monotonic()
-            self._samples.append((now, max(0.0, now - t0 - self.interval_s)))
-            while self._samples and self._samples[0][0] < now - self.window_s:
-                self._samples.popleft()
+            with self._lock:
+                self._samples.append((now, max(0.0, now - t0 - self.interval_s)))
+                while self._samples and self._samples[0][0] < now - self.window_s:
+                    self._samples.popleft()
 
     def max_ms(self) -> float:
         """The worst lag of the window, in milliseconds (0 before the first sample)."""
-        return round(1000.0 * max((lag for _, lag in self._samples), default=0.0), 1)
+        with self._lock:
+            worst = max((lag for _, lag in self._samples), default=0.0)
+        return round(1000.0 * worst, 1)
