@@ -250,7 +250,12 @@ def _excitation(runs: Mapping[str, ScenarioRun], *, roams: bool) -> str:
             "excite Θ along one direction only and TQ Lemma 8's persistent excitation fails: "
             "the time-varying gain K ≈ P⁻¹ of (54) lets speed noise, which enters both Φ_f "
             "and J(N − N_f)/k, move Θ̂ along the other direction, and κ > 0 adds the "
-            "instantaneous noise of W2 to it, while ΦΘ̂ still fits at the operating point."
+            "instantaneous noise of W2 to it, while ΦΘ̂ still fits at the operating point. "
+            "τ̂ = ΦΘ̂ then carries θ̂1 times the speed noise. κ > 0 still lowers the error "
+            "below 10 Hz, as TQ §VI says, but raises it above 10 Hz, where most of our plant's "
+            "5–30 s error lies (the firing ripple, the speed noise). More excitation from the "
+            "plant does not change that: induction pulsation in ṁ_ai, even scaled 20×, leaves "
+            "(54) κ = 0.1 behind (50) (README, torque section)."
         )
     return text + (
         " (50) with ṁ_ai in kg/s and Γ = diag(0.1, 100) moves θ̂2 at the rate Γ2·ṁ_ai²/ℓ, "
