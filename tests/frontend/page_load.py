@@ -13,6 +13,8 @@ if TYPE_CHECKING:
 
     from playwright.sync_api import Browser, Page
 
+from tests.frontend.browser import VIEWPORT
+
 JS = Path(__file__).parent / "js"
 
 # The view's own content (what the first render shows) and its first plot, per view.
@@ -70,7 +72,7 @@ def measure_loads(
     """Each view in its own new context (empty cache): one cold load, then ``warm`` reloads."""
     loads = []
     for name, url, _title in views(run):
-        context = browser.new_context(base_url=base_url, viewport={"width": 1400, "height": 900})
+        context = browser.new_context(base_url=base_url, viewport=VIEWPORT)
         try:
             page = context.new_page()
             if on_page is not None:
