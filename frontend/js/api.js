@@ -59,7 +59,11 @@ async function errorFrom(response) {
 
 /** fetch() with JSON in and out; resolves to the parsed body (null for 204). */
 export async function request(method, path, { body, query, signal, headers } = {}) {
-  const init = { method, signal, headers: { Accept: "application/json", ...authHeaders(), ...headers } };
+  const init = {
+    method,
+    signal,
+    headers: { Accept: "application/json", ...authHeaders(), ...headers },
+  };
   if (body instanceof FormData) init.body = body;
   else if (body !== undefined) {
     init.body = JSON.stringify(body);
@@ -89,7 +93,7 @@ export const api = {
     const items = [];
     for (let offset = 0; ; offset += limit) {
       const page = await request("GET", path, { query: { ...query, limit, offset }, signal });
-      const batch = Array.isArray(page) ? page : page.items ?? [];
+      const batch = Array.isArray(page) ? page : (page.items ?? []);
       items.push(...batch);
       if (Array.isArray(page) || batch.length < limit || items.length >= (page.total ?? 0)) break;
     }
@@ -119,10 +123,18 @@ export const api = {
         if (xhr.status >= 200 && xhr.status < 300) resolve(body);
         else {
           if (xhr.status === 401 && unauthorizedHandler) unauthorizedHandler();
-          reject(new ApiError(xhr.status, body?.error ?? { message: `${xhr.status} ${xhr.statusText}` }));
+          reject(
+            new ApiError(xhr.status, body?.error ?? { message: `${xhr.status} ${xhr.statusText}` }),
+          );
         }
       };
-      xhr.onerror = () => reject(new ApiError(0, { code: "network", message: "Upload failed: the server cannot be reached." }));
+      xhr.onerror = () =>
+        reject(
+          new ApiError(0, {
+            code: "network",
+            message: "Upload failed: the server cannot be reached.",
+          }),
+        );
       xhr.onabort = () => reject(new DOMException("Upload cancelled", "AbortError"));
       signal?.addEventListener("abort", () => xhr.abort());
       xhr.send(formData);
@@ -182,7 +194,9 @@ export function clearErrors(container) {
   for (const el of container.querySelectorAll(SEL.fieldError)) el.remove();
   for (const el of container.querySelectorAll(SEL.invalid)) {
     el.removeAttribute("aria-invalid");
-    const ids = (el.getAttribute("aria-describedby") || "").split(" ").filter((id) => !id.startsWith("err-"));
+    const ids = (el.getAttribute("aria-describedby") || "")
+      .split(" ")
+      .filter((id) => !id.startsWith("err-"));
     if (ids.length) el.setAttribute("aria-describedby", ids.join(" "));
     else el.removeAttribute("aria-describedby");
   }
@@ -195,10 +209,13 @@ export function clearErrors(container) {
 /** The control that names `field` ("config.sigma_w" → [name="config.sigma_w"]), trying parents too. */
 function controlFor(container, field) {
   if (!field) return null;
-  const parts = String(field).split(/[.[\]]+/).filter(Boolean);
+  const parts = String(field)
+    .split(/[.[\]]+/)
+    .filter(Boolean);
   for (let n = parts.length; n > 0; n -= 1) {
     const key = parts.slice(0, n).join(".");
-    const el = container.querySelector(SELECT.dataField(key)) || container.querySelector(SELECT.name(key));
+    const el =
+      container.querySelector(SELECT.dataField(key)) || container.querySelector(SELECT.name(key));
     if (el) return el;
   }
   return null;
@@ -211,7 +228,8 @@ function controlFor(container, field) {
 export function showError(container, err, { prefix = "" } = {}) {
   if (err?.name === "AbortError") return null;
   const message = err?.message || String(err);
-  const control = controlFor(container, err?.field ? `${prefix}${err.field}` : null) ||
+  const control =
+    controlFor(container, err?.field ? `${prefix}${err.field}` : null) ||
     controlFor(container, err?.field);
   if (control) {
     const id = `err-${Math.random().toString(36).slice(2, 9)}`;

@@ -20,7 +20,12 @@ export function h(tag, attrs = {}, ...children) {
       Object.assign(el.style, value);
     } else if (key === "value" && "value" in el) {
       el.value = value;
-    } else if (key === "checked" || key === "selected" || key === "disabled" || key === "indeterminate") {
+    } else if (
+      key === "checked" ||
+      key === "selected" ||
+      key === "disabled" ||
+      key === "indeterminate"
+    ) {
       el[key] = Boolean(value);
     } else {
       el.setAttribute(key, value === true ? "" : String(value));
@@ -60,7 +65,11 @@ export function qsa(sel, root = document) {
 
 /** An inline SVG icon from a path list (stroke icons, 24×24). */
 export function icon(paths, { filled = false } = {}) {
-  const svg = h("svg:svg", { viewBox: "0 0 24 24", "aria-hidden": "true", class: filled ? "filled" : null });
+  const svg = h("svg:svg", {
+    viewBox: "0 0 24 24",
+    "aria-hidden": "true",
+    class: filled ? "filled" : null,
+  });
   for (const d of [].concat(paths)) svg.append(h("svg:path", { d }));
   return svg;
 }
@@ -90,9 +99,13 @@ export function fmt(value, digits = 4) {
   if (typeof value !== "number") return String(value);
   if (value === 0) return "0";
   const abs = Math.abs(value);
-  if (abs >= 1e6 || abs < 1e-3) return value.toExponential(Math.max(0, digits - 2)).replace("e+", "e");
+  if (abs >= 1e6 || abs < 1e-3)
+    return value.toExponential(Math.max(0, digits - 2)).replace("e+", "e");
   const decimals = Math.max(0, digits - 1 - Math.floor(Math.log10(abs)));
-  return value.toLocaleString("en-US", { maximumFractionDigits: decimals, minimumFractionDigits: 0 });
+  return value.toLocaleString("en-US", {
+    maximumFractionDigits: decimals,
+    minimumFractionDigits: 0,
+  });
 }
 
 export function fmtInt(value) {
@@ -113,8 +126,13 @@ export function fmtDate(iso) {
   const d = new Date(iso);
   if (Number.isNaN(d.getTime())) return iso;
   const sameYear = d.getFullYear() === new Date().getFullYear();
-  return d.toLocaleString(undefined, { day: "numeric", month: "short", year: sameYear ? undefined : "numeric",
-    hour: "2-digit", minute: "2-digit" });
+  return d.toLocaleString(undefined, {
+    day: "numeric",
+    month: "short",
+    year: sameYear ? undefined : "numeric",
+    hour: "2-digit",
+    minute: "2-digit",
+  });
 }
 
 export function fmtBytes(n) {
@@ -131,9 +149,18 @@ export function withUnit(name, unit) {
 /** Metric keys as people say them. */
 export function metricLabel(key) {
   const known = {
-    rmse: "RMSE", map_rmse: "Map RMSE", output_rmse: "Output RMSE", max_abs_error: "Max |error|",
-    mean_relative_error: "Mean rel. error", coverage: "Coverage", ise: "ISE", mae: "MAE", sd: "SD",
-    samples_per_s: "Samples/s", estimate_s: "Compute time", run_s: "Compute time",
+    rmse: "RMSE",
+    map_rmse: "Map RMSE",
+    output_rmse: "Output RMSE",
+    max_abs_error: "Max |error|",
+    mean_relative_error: "Mean rel. error",
+    coverage: "Coverage",
+    ise: "ISE",
+    mae: "MAE",
+    sd: "SD",
+    samples_per_s: "Samples/s",
+    estimate_s: "Compute time",
+    run_s: "Compute time",
   };
   return known[key] ?? key.replaceAll("_", " ").replace(/^\w/, (c) => c.toUpperCase());
 }
@@ -223,7 +250,9 @@ export function niceBreakpoints(lo, hi, n) {
 
 /** "0, 500, 1000" → [0, 500, 1000]; throws a message naming the bad token. */
 export function parseNumberList(text) {
-  const parts = String(text).split(/[\s,;]+/).filter(Boolean);
+  const parts = String(text)
+    .split(/[\s,;]+/)
+    .filter(Boolean);
   return parts.map((p) => {
     const v = Number(p);
     if (!Number.isFinite(v)) throw new Error(`"${p}" is not a number`);
@@ -232,18 +261,36 @@ export function parseNumberList(text) {
 }
 
 /** A modal confirmation (native <dialog>); resolves true when confirmed. */
-export function confirmDialog(message, { title = "Are you sure?", confirmLabel = "Confirm", danger = false } = {}) {
+export function confirmDialog(
+  message,
+  { title = "Are you sure?", confirmLabel = "Confirm", danger = false } = {},
+) {
   return new Promise((resolve) => {
     const id = `dlg-${Math.random().toString(36).slice(2, 8)}`;
     const dialog = h(
       "dialog",
       { "aria-labelledby": id, "data-confirm": "" },
-      h("form", { method: "dialog" },
+      h(
+        "form",
+        { method: "dialog" },
         h("h2", { id, style: { marginBottom: "8px" } }, title),
         h("p", { style: { color: "var(--text-2)" } }, message),
-        h("div", { class: "row end", style: { marginTop: "16px" } },
+        h(
+          "div",
+          { class: "row end", style: { marginTop: "16px" } },
           h("button", { value: "cancel", type: "submit" }, "Cancel"),
-          h("button", { value: "ok", type: "submit", class: danger ? "danger" : "primary", "data-confirm-ok": "" }, confirmLabel))),
+          h(
+            "button",
+            {
+              value: "ok",
+              type: "submit",
+              class: danger ? "danger" : "primary",
+              "data-confirm-ok": "",
+            },
+            confirmLabel,
+          ),
+        ),
+      ),
     );
     dialog.addEventListener("close", () => {
       resolve(dialog.returnValue === "ok");

@@ -9,19 +9,42 @@ import { h, icon, ICONS } from "./dom.js";
  *   versionId: the version to export (null: the run's final map)
  */
 export function exportMenu(runId, { versionId, errorHost, signal }) {
-  const list = h("div", { class: "menu-list", role: "menu", hidden: true },
-    EXPORT_FORMATS.map((f) => h("button", { type: "button", role: "menuitem", tabindex: "-1", "data-export": f.value,
-      onclick: async () => {
-        close();
-        const vid = versionId();
-        try {
-          await api.download(`/api/runs/${runId}/export`, { format: f.value, version: vid ?? undefined }, `run-${runId}.${f.value}`);
-        } catch (err) {
-          showError(errorHost, err);
-        }
-      } }, f.label)));
-  const button = h("button", { type: "button", "aria-haspopup": "menu", "aria-expanded": "false", "data-export-menu": "" },
-    icon(ICONS.download), "Export", icon(ICONS.chevron));
+  const list = h(
+    "div",
+    { class: "menu-list", role: "menu", hidden: true },
+    EXPORT_FORMATS.map((f) =>
+      h(
+        "button",
+        {
+          type: "button",
+          role: "menuitem",
+          tabindex: "-1",
+          "data-export": f.value,
+          onclick: async () => {
+            close();
+            const vid = versionId();
+            try {
+              await api.download(
+                `/api/runs/${runId}/export`,
+                { format: f.value, version: vid ?? undefined },
+                `run-${runId}.${f.value}`,
+              );
+            } catch (err) {
+              showError(errorHost, err);
+            }
+          },
+        },
+        f.label,
+      ),
+    ),
+  );
+  const button = h(
+    "button",
+    { type: "button", "aria-haspopup": "menu", "aria-expanded": "false", "data-export-menu": "" },
+    icon(ICONS.download),
+    "Export",
+    icon(ICONS.chevron),
+  );
   const el = h("div", { class: "menu" }, button, list);
 
   function open() {

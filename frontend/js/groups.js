@@ -1,8 +1,8 @@
 /**
  * What the Sweeps and Batches views share: a group's progress, sortable table headers whose
- * state lives in the URL (?sort=key:asc), and polling while any run is queued or running.
+ * state lives in the URL (?sort=key:asc). Both poll (poll.js) while any run is queued or running.
  */
-import { GROUP_POLL_MS, RUN_ACTIVE, SELECT } from "./constants.js";
+import { RUN_ACTIVE, SELECT } from "./constants.js";
 import { fmt, fmtDate, h, metricLabel } from "./dom.js";
 
 /** Datasets a batch's row of the list names (the rest are counted). */
@@ -20,39 +20,35 @@ export function countBadges(counts) {
   const order = ["running", "queued", "succeeded", "failed", "cancelled", "interrupted"];
   const rank = (k) => (order.includes(k) ? order.indexOf(k) : order.length);
   const keys = Object.keys(counts ?? {}).sort((a, b) => rank(a) - rank(b));
-  return h("span", { class: "row", style: { gap: "6px" }, "data-counts": "" },
-    keys.map((k) => h("span", { class: "badge", dataset: { status: k } }, `${counts[k]} ${k}`)));
+  return h(
+    "span",
+    { class: "row", style: { gap: "6px" }, "data-counts": "" },
+    keys.map((k) => h("span", { class: "badge", dataset: { status: k } }, `${counts[k]} ${k}`)),
+  );
 }
 
 /** A progress bar with its numbers, for the head of a sweep or batch. */
 export function progressBar(group, label) {
   const { done, total } = progressOf(group);
   const pct = total ? Math.round((100 * done) / total) : 0;
-  return h("div", { class: "group-progress", "data-group-progress": "" },
-    h("div", { class: "progress", role: "progressbar", "aria-label": label, "aria-valuemin": "0", "aria-valuemax": "100",
-      "aria-valuenow": String(pct) }, h("span", { style: { width: `${pct}%` } })),
+  return h(
+    "div",
+    { class: "group-progress", "data-group-progress": "" },
+    h(
+      "div",
+      {
+        class: "progress",
+        role: "progressbar",
+        "aria-label": label,
+        "aria-valuemin": "0",
+        "aria-valuemax": "100",
+        "aria-valuenow": String(pct),
+      },
+      h("span", { style: { width: `${pct}%` } }),
+    ),
     h("span", { class: "pct" }, `${done} of ${total} runs finished`),
-    countBadges(group.counts));
-}
-
-/**
- * Call load() now and again every `every` ms for as long as it resolves true; stops when the
- * view is left. Resolves when the first load is done (the view's first render).
- */
-export function poll(signal, load, every = GROUP_POLL_MS) {
-  let timer = 0;
-  signal.addEventListener("abort", () => clearTimeout(timer));
-  const tick = async () => {
-    let again;
-    try {
-      again = await load();
-    } catch (err) {
-      if (err?.name === "AbortError") return;
-      throw err;
-    }
-    if (again && !signal.aborted) timer = setTimeout(() => tick().catch((err) => console.warn(err)), every);
-  };
-  return tick();
+    countBadges(group.counts),
+  );
 }
 
 /* ---------- sortable tables ---------- */
@@ -78,7 +74,10 @@ export function sortRows(rows, columns, sort) {
       const ea = a.v === null || a.v === undefined;
       const eb = b.v === null || b.v === undefined;
       if (ea || eb) return ea === eb ? a.i - b.i : ea ? 1 : -1;
-      const c = typeof a.v === "number" && typeof b.v === "number" ? a.v - b.v : String(a.v).localeCompare(String(b.v));
+      const c =
+        typeof a.v === "number" && typeof b.v === "number"
+          ? a.v - b.v
+          : String(a.v).localeCompare(String(b.v));
       return c * sort.dir || a.i - b.i;
     })
     .map((x) => x.row);
@@ -89,12 +88,28 @@ export function sortRows(rows, columns, sort) {
  * with the clicked column; the caller re-renders and calls focusSort to keep the focus.
  */
 export function sortHeader(columns, sort, onSort) {
-  return h("tr", {}, columns.map((c) => {
-    const state = sort.key === c.key ? (sort.dir > 0 ? "ascending" : "descending") : "none";
-    return h("th", { scope: "col", class: c.num ? "num" : null, "aria-sort": c.sortable === false ? null : state },
-      c.sortable === false ? c.label
-        : h("button", { type: "button", class: "sort", "data-sort": c.key, onclick: () => onSort(c.key) }, c.label));
-  }));
+  return h(
+    "tr",
+    {},
+    columns.map((c) => {
+      const state = sort.key === c.key ? (sort.dir > 0 ? "ascending" : "descending") : "none";
+      return h(
+        "th",
+        {
+          scope: "col",
+          class: c.num ? "num" : null,
+          "aria-sort": c.sortable === false ? null : state,
+        },
+        c.sortable === false
+          ? c.label
+          : h(
+              "button",
+              { type: "button", class: "sort", "data-sort": c.key, onclick: () => onSort(c.key) },
+              c.label,
+            ),
+      );
+    }),
+  );
 }
 
 /** The next sort after a click on `key`: the same column flips, another starts ascending. */
@@ -112,29 +127,71 @@ export function focusSort(root, key) {
 export function groupTable(groups, { kind, datasetName }) {
   if (!groups.length) return null;
   const sweep = kind === "sweep";
-  const head = h("tr", {},
-    [sweep ? "Sweep" : "Batch", "Estimator", sweep ? "Ranked by" : "Datasets", "Runs", sweep ? "Best run" : "Aggregate", "Created"]
-      .map((t) => h("th", { scope: "col", class: t === "Best run" ? "num" : null }, t)));
+  const head = h(
+    "tr",
+    {},
+    [
+      sweep ? "Sweep" : "Batch",
+      "Estimator",
+      sweep ? "Ranked by" : "Datasets",
+      "Runs",
+      sweep ? "Best run" : "Aggregate",
+      "Created",
+    ].map((t) => h("th", { scope: "col", class: t === "Best run" ? "num" : null }, t)),
+  );
   const rows = groups.map((g) => {
     const { active } = progressOf(g);
     const best = sweep ? g.runs.find((r) => r.id === g.best_run_id) : null;
     const ids = [...new Set(g.runs.map((r) => r.dataset_id))];
     const allOk = g.runs.length > 0 && g.runs.every((r) => r.status === "succeeded");
-    return h("tr", { dataset: { groupId: g.id } },
-      h("td", { class: "wrap" }, h("a", { href: `/${sweep ? "sweeps" : "batches"}/${g.id}` }, g.name), " ",
-        h("span", { class: "sub" }, `#${g.id}`)),
+    return h(
+      "tr",
+      { dataset: { groupId: g.id } },
+      h(
+        "td",
+        { class: "wrap" },
+        h("a", { href: `/${sweep ? "sweeps" : "batches"}/${g.id}` }, g.name),
+        " ",
+        h("span", { class: "sub" }, `#${g.id}`),
+      ),
       h("td", {}, h("code", { class: "tag accent" }, g.estimator)),
-      h("td", { class: "wrap" }, sweep
-        ? `${metricLabel(g.metric ?? "")} (${g.order === "max" ? "highest" : "lowest"} first)`
-        : ids.length > LISTED_DATASETS
-          ? `${ids.slice(0, LISTED_DATASETS - 1).map(datasetName).join(", ")} and ${ids.length - LISTED_DATASETS + 1} more`
-          : ids.map(datasetName).join(", ")),
+      h(
+        "td",
+        { class: "wrap" },
+        sweep
+          ? `${metricLabel(g.metric ?? "")} (${g.order === "max" ? "highest" : "lowest"} first)`
+          : ids.length > LISTED_DATASETS
+            ? `${ids
+                .slice(0, LISTED_DATASETS - 1)
+                .map(datasetName)
+                .join(", ")} and ${ids.length - LISTED_DATASETS + 1} more`
+            : ids.map(datasetName).join(", "),
+      ),
       h("td", {}, countBadges(g.counts)),
-      h("td", { class: sweep ? "num" : null }, sweep
-        ? (best ? [h("a", { href: `/runs/${best.id}` }, `#${best.id}`), ` ${fmt(best.metric)}`] : "–")
-        : (allOk ? "ready" : active ? "once every run has finished" : "needs every run to succeed")),
-      h("td", {}, fmtDate(g.created_at)));
+      h(
+        "td",
+        { class: sweep ? "num" : null },
+        sweep
+          ? best
+            ? [h("a", { href: `/runs/${best.id}` }, `#${best.id}`), ` ${fmt(best.metric)}`]
+            : "–"
+          : allOk
+            ? "ready"
+            : active
+              ? "once every run has finished"
+              : "needs every run to succeed",
+      ),
+      h("td", {}, fmtDate(g.created_at)),
+    );
   });
-  return h("div", { class: "table-wrap" },
-    h("table", { class: "data", [`data-${kind}-list`]: "" }, h("thead", {}, head), h("tbody", {}, rows)));
+  return h(
+    "div",
+    { class: "table-wrap" },
+    h(
+      "table",
+      { class: "data", [`data-${kind}-list`]: "" },
+      h("thead", {}, head),
+      h("tbody", {}, rows),
+    ),
+  );
 }

@@ -74,7 +74,10 @@ export class LiveStream {
       if (this.closed) return;
       if (FINAL_CLOSE.has(event.code)) {
         this.closed = true;
-        this.emitConnection("closed", { code: event.code, reason: event.reason || "stream refused" });
+        this.emitConnection("closed", {
+          code: event.code,
+          reason: event.reason || "stream refused",
+        });
         return;
       }
       this.scheduleReconnect(event.reason || `connection lost (${event.code})`);

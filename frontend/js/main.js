@@ -3,14 +3,18 @@ import { api, onUnauthorized, setToken } from "./api.js";
 import { EVT, SEL, STORAGE } from "./constants.js";
 import { h, icon, ICONS, qs, qsa, toast } from "./dom.js";
 import { loadPlotly } from "./plot.js";
+import { poll } from "./poll.js";
 import { Router } from "./router.js";
 import * as batches from "./views/batches.js";
 import * as compare from "./views/compare.js";
 import * as datasets from "./views/datasets.js";
-import * as newRun from "./views/new-run.js";
-import * as runLive from "./views/run-live.js";
+import * as newRun from "./views/new-run/index.js";
+import * as runLive from "./views/run/index.js";
 import * as sweeps from "./views/sweeps.js";
 import * as versions from "./views/versions.js";
+
+/** The server's health (and version) in the sidebar is refreshed this often. */
+const HEALTH_POLL_MS = 15000;
 
 const ROUTES = [
   { path: /^\/$/, redirect: "/datasets" },
@@ -56,8 +60,12 @@ function showCurrentRun(run) {
   host.hidden = false;
   host.replaceChildren(
     h("div", { class: "label" }, "Current run"),
-    h("a", { href: `/runs/${run.id}`, "data-nav": "", "data-section": "run" },
-      icon(ICONS.play), `#${run.id} ${run.estimator}`),
+    h(
+      "a",
+      { href: `/runs/${run.id}`, "data-nav": "", "data-section": "run" },
+      icon(ICONS.play),
+      `#${run.id} ${run.estimator}`,
+    ),
   );
 }
 
@@ -79,13 +87,23 @@ function askForToken() {
   const dialog = h(
     "dialog",
     { "data-token": "", "aria-labelledby": "token-title" },
-    h("form", { method: "dialog" },
+    h(
+      "form",
+      { method: "dialog" },
       h("h2", { id: "token-title" }, "API token needed"),
-      h("p", { class: "help" }, "This server requires a bearer token. It is kept in this browser only."),
+      h(
+        "p",
+        { class: "help" },
+        "This server requires a bearer token. It is kept in this browser only.",
+      ),
       h("div", { class: "field" }, h("label", { for: "token-input" }, "Token"), input),
-      h("div", { class: "row end" },
+      h(
+        "div",
+        { class: "row end" },
         h("button", { value: "cancel", type: "submit" }, "Cancel"),
-        h("button", { value: "ok", type: "submit", class: "primary" }, "Save"))),
+        h("button", { value: "ok", type: "submit", class: "primary" }, "Save"),
+      ),
+    ),
   );
   dialog.addEventListener("close", () => {
     if (dialog.returnValue === "ok" && input.value) {
@@ -104,10 +122,19 @@ function boot() {
   window.addEventListener(EVT.currentRun, (e) => showCurrentRun(e.detail));
   const router = new Router(ROUTES, qs(SEL.main), { onChange: (section) => highlightNav(section) });
   // The first view is on screen before the browser spends its second on Plotly.js.
-  const plots = () => loadPlotly().catch((err) => toast(`Plots are unavailable: ${err.message}`, { error: true, ms: 10000 }));
+  const plots = () =>
+    loadPlotly().catch((err) =>
+      toast(`Plots are unavailable: ${err.message}`, { error: true, ms: 10000 }),
+    );
   router.start().finally(() => requestAnimationFrame(() => setTimeout(plots, 0)));
-  pollHealth();
-  setInterval(pollHealth, 15000);
+  poll(
+    null,
+    async () => {
+      await pollHealth();
+      return true;
+    },
+    HEALTH_POLL_MS,
+  );
 }
 
 boot();

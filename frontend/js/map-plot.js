@@ -10,15 +10,44 @@
  * A "deviation" plot shows standardised deviations z on a diverging scale, with the cells
  * listed in frame.outlines (e.g. |z| > 3) outlined.
  */
+import { ColorBar } from "./color-bar.js";
 import { fmt, h, withUnit } from "./dom.js";
 import {
-  axis, baseLayout, decadeTicks, hasWebGL, purge, react, SCALE_DIFF, SCALE_VALUE, SCALE_VARIANCE, SCALE_VIRIDIS, theme,
+  cellEdges,
+  finiteExtent,
+  interp1,
+  interp2,
+  logNested,
+  nearestIndex,
+  niceRange,
+  outerEdges,
+  padRange,
+  sliceNested,
+  transpose,
+  widenRange,
+} from "./grid-math.js";
+import {
+  axis,
+  baseLayout,
+  decadeTicks,
+  hasWebGL,
+  purge,
+  react,
+  SCALE_DIFF,
+  SCALE_VALUE,
+  SCALE_VARIANCE,
+  SCALE_VIRIDIS,
+  theme,
   withAlpha,
 } from "./plot.js";
 
-const TINY = 1e-300;
 /** Trace names (also what tests and hover look for). */
-export const TRACE = Object.freeze({ trail: "trail", point: "operating point", active: "active cell", outlines: "outlined cells" });
+export const TRACE = Object.freeze({
+  trail: "trail",
+  point: "operating point",
+  active: "active cell",
+  outlines: "outlined cells",
+});
 /** Kinds drawn on the diverging scale, symmetric about zero. */
 const DIVERGING = new Set(["diff", "deviation"]);
 let uid = 0;
@@ -45,7 +74,17 @@ export class MapPlot {
    * @param {{kind?: "value"|"variance"|"visits"|"diff"|"deviation", unit?: string, label?: string, mode?: "heatmap"|"surface",
    *   gaps?: boolean, slices?: SliceGroup}} opts
    */
-  constructor(el, { kind = "value", unit = "", label = "value", mode = "heatmap", gaps = true, slices = null } = {}) {
+  constructor(
+    el,
+    {
+      kind = "value",
+      unit = "",
+      label = "value",
+      mode = "heatmap",
+      gaps = true,
+      slices = null,
+    } = {},
+  ) {
     this.el = el;
     this.kind = kind;
     this.unit = unit;
@@ -95,8 +134,12 @@ export class MapPlot {
     const { axes, values } = frame;
     if (!axes?.length || !values) return null;
     if (!this.bar && this.el.parentElement) this.bar = new ColorBar(this.el, this.kind); // before Plotly sizes the plot
-    const full = this.kind === "variance" ? logNested(frame.variances ?? values)
-      : this.kind === "visits" ? (frame.visits ?? values) : values;
+    const full =
+      this.kind === "variance"
+        ? logNested(frame.variances ?? values)
+        : this.kind === "visits"
+          ? (frame.visits ?? values)
+          : values;
     this.widen(full);
     this.syncSlicer(axes);
     const shown = axes.length > 2 ? this.sliced(frame) : frame;
@@ -126,9 +169,9 @@ export class MapPlot {
     const old = this.slice;
     const index = extra.map((a) => {
       const k = old.axes.findIndex((o) => o.name === a.name);
-      if (k >= 0) return nearest(a.breakpoints, old.axes[k].breakpoints[old.index[k]]);
+      if (k >= 0) return nearestIndex(a.breakpoints, old.axes[k].breakpoints[old.index[k]]);
       const remembered = this.slices?.values.get(a.name);
-      return remembered === undefined ? 0 : nearest(a.breakpoints, remembered);
+      return remembered === undefined ? 0 : nearestIndex(a.breakpoints, remembered);
     });
     if (!this.slice.host && extra.length) {
       this.slice.host = h("div", { class: "slice-pickers", "data-slice-pickers": "" });
@@ -139,8 +182,15 @@ export class MapPlot {
     const pickers = extra.map((a, k) => {
       uid += 1;
       const id = `slice-${uid}`;
-      const input = h("input", { type: "range", id, min: "0", max: String(a.breakpoints.length - 1), step: "1",
-        value: String(index[k]), "data-slice-axis": a.name });
+      const input = h("input", {
+        type: "range",
+        id,
+        min: "0",
+        max: String(a.breakpoints.length - 1),
+        step: "1",
+        value: String(index[k]),
+        "data-slice-axis": a.name,
+      });
       const label = h("label", { for: id, class: "slice-label" });
       input.addEventListener("input", () => {
         this.slice.index[k] = Number(input.value);
@@ -167,7 +217,7 @@ export class MapPlot {
   showSliceValue(name, value) {
     const k = this.slice.axes.findIndex((a) => a.name === name);
     if (k < 0) return;
-    const i = nearest(this.slice.axes[k].breakpoints, value);
+    const i = nearestIndex(this.slice.axes[k].breakpoints, value);
     if (i === this.slice.index[k]) return;
     this.slice.index[k] = i;
     this.slice.inputs[k].value = String(i);
@@ -180,7 +230,8 @@ export class MapPlot {
     const idx = this.slice.index;
     const cut = (m) => (m ? sliceNested(m, idx) : m);
     const cell = frame.activeCell;
-    const inSlice = (c) => Array.isArray(c) && c.length === frame.axes.length && idx.every((k, n) => c[n + 2] === k);
+    const inSlice = (c) =>
+      Array.isArray(c) && c.length === frame.axes.length && idx.every((k, n) => c[n + 2] === k);
     return {
       ...frame,
       axes: frame.axes.slice(0, 2),
@@ -190,7 +241,9 @@ export class MapPlot {
       weights: cut(frame.weights),
       activeCell: inSlice(cell) ? cell.slice(0, 2) : null,
       outlines: frame.outlines?.filter(inSlice).map((c) => c.slice(0, 2)),
-      sliceText: this.slice.axes.map((a, k) => `${a.name} = ${fmt(a.breakpoints[idx[k]])} ${a.unit ?? ""}`).join("<br>"),
+      sliceText: this.slice.axes
+        .map((a, k) => `${a.name} = ${fmt(a.breakpoints[idx[k]])} ${a.unit ?? ""}`)
+        .join("<br>"),
     };
   }
 
@@ -206,50 +259,55 @@ export class MapPlot {
       scale: this.scale(),
       range: this.range,
       log: this.kind === "variance",
-      title: this.kind === "variance" || this.kind === "visits" ? this.kind : this.kind === "deviation" ? "z" : this.unit,
+      title:
+        this.kind === "variance" || this.kind === "visits"
+          ? this.kind
+          : this.kind === "deviation"
+            ? "z"
+            : this.unit,
       top: size?.t ?? 8,
       height: size?.h ?? null,
-      clipped: { lo: this.range !== null && lo < this.range[0], hi: this.range !== null && hi > this.range[1] },
+      clipped: {
+        lo: this.range !== null && lo < this.range[0],
+        hi: this.range !== null && hi > this.range[1],
+      },
     });
   }
 
+  /** The colour range for values z: fixed, symmetric (diverging kinds), seeded or widened. */
   widen(z) {
-    const flat = z.flat(Infinity).filter((v) => v !== null && Number.isFinite(v));
-    if (!flat.length) return;
-    let lo = Infinity;
-    let hi = -Infinity;
-    for (const v of flat) {
-      if (v < lo) lo = v;
-      if (v > hi) hi = v;
-    }
-    this.extremes = [lo, hi];
+    const extent = finiteExtent(z);
+    if (!extent) return;
+    const [lo, hi] = extent;
+    this.extremes = extent;
+    if (this.fixed && this.range) return;
     if (DIVERGING.has(this.kind)) {
-      if (this.fixed && this.range) return;
       const m = Math.max(Math.abs(lo), Math.abs(hi)) || 1;
       this.range = [-m, m];
       return;
     }
-    if (this.fixed && this.range) return;
-    if (!this.range) {
-      this.range = niceRange(lo, hi, { log: this.kind === "variance" });
-      return;
-    }
-    // Widen in steps of a quarter of the current span: a function of the values only.
-    const [r0, r1] = this.range;
-    const step = (r1 - r0) / 4;
-    if (lo < r0 || hi > r1) {
-      this.range = [lo < r0 ? r0 - step * Math.ceil((r0 - lo) / step) : r0, hi > r1 ? r1 + step * Math.ceil((hi - r1) / step) : r1];
-    }
+    this.range = this.range
+      ? widenRange(this.range, lo, hi)
+      : niceRange(lo, hi, { log: this.kind === "variance" });
   }
 
   colorbar() {
     const t = theme();
     const base = {
-      thickness: 12, outlinewidth: 0, len: 0.95, x: 1.01, xpad: 6,
+      thickness: 12,
+      outlinewidth: 0,
+      len: 0.95,
+      x: 1.01,
+      xpad: 6,
       tickfont: { size: 11, color: t.text3 },
-      title: { text: this.kind === "variance" ? "variance" : this.unit || "", side: "right", font: { size: 11.5, color: t.text2 } },
+      title: {
+        text: this.kind === "variance" ? "variance" : this.unit || "",
+        side: "right",
+        font: { size: 11.5, color: t.text2 },
+      },
     };
-    if (this.kind === "variance" && this.range) Object.assign(base, decadeTicks(...this.range), { tickmode: "array" });
+    if (this.kind === "variance" && this.range)
+      Object.assign(base, decadeTicks(...this.range), { tickmode: "array" });
     return base;
   }
 
@@ -262,7 +320,9 @@ export class MapPlot {
 
   hover(axes, sliceText = "") {
     const [a0, a1] = axes;
-    const head = `${a0.name} = %{x} ${a0.unit ?? ""}` + (a1 ? `<br>${a1.name} = %{y} ${a1.unit ?? ""}` : "") +
+    const head =
+      `${a0.name} = %{x} ${a0.unit ?? ""}` +
+      (a1 ? `<br>${a1.name} = %{y} ${a1.unit ?? ""}` : "") +
       (sliceText ? `<br>${sliceText}` : "");
     if (this.kind === "deviation") {
       return `${head}<br><b>z = %{customdata[0]}</b><br>weight in the merge = %{customdata[1]}<extra></extra>`;
@@ -279,12 +339,14 @@ export class MapPlot {
     const data = [
       {
         type: "heatmap",
-        x, y,
+        x,
+        y,
         z: transpose(z),
         customdata: cellText(frame),
         hovertemplate: this.hover(frame.axes, frame.sliceText),
         colorscale: this.scale(),
-        zmin: this.range?.[0], zmax: this.range?.[1],
+        zmin: this.range?.[0],
+        zmax: this.range?.[1],
         zauto: false,
         showscale: false,
         xgap: this.gaps && x.length * y.length <= 400 ? 1 : 0,
@@ -294,37 +356,79 @@ export class MapPlot {
     const trail = frame.trail;
     if (trail?.x?.length) {
       data.push(
-        { type: "scatter", mode: "lines", name: TRACE.trail, x: trail.x, y: trail.y, hoverinfo: "skip", showlegend: false,
-          line: { color: withAlpha(t.trail, 0.85), width: 1.5 } },
-        { type: "scatter", mode: "markers", name: TRACE.point, x: [trail.x.at(-1)], y: [trail.y.at(-1)], showlegend: false,
+        {
+          type: "scatter",
+          mode: "lines",
+          name: TRACE.trail,
+          x: trail.x,
+          y: trail.y,
+          hoverinfo: "skip",
+          showlegend: false,
+          line: { color: withAlpha(t.trail, 0.85), width: 1.5 },
+        },
+        {
+          type: "scatter",
+          mode: "markers",
+          name: TRACE.point,
+          x: [trail.x.at(-1)],
+          y: [trail.y.at(-1)],
+          showlegend: false,
           hovertemplate: `operating point<br>${a0.name} = %{x:.4g}<br>${a1.name} = %{y:.4g}<extra></extra>`,
-          marker: { size: 11, color: t.trail, line: { color: t.trailEdge, width: 2 } } },
+          marker: { size: 11, color: t.trail, line: { color: t.trailEdge, width: 2 } },
+        },
       );
     }
     const cell = frame.activeCell;
     if (cell && cell.length >= 2) {
       // The active cell is the table entry with the largest interpolation weight: its brick.
-      const [x0, x1] = brick(x, cell[0]);
-      const [y0, y1] = brick(y, cell[1]);
-      data.push({ type: "scatter", mode: "lines", name: TRACE.active, x: [x0, x1, x1, x0, x0], y: [y0, y0, y1, y1, y0],
-        hoverinfo: "skip", showlegend: false, line: { color: t.activeCell, width: 2.5 } });
+      const [x0, x1] = cellEdges(x, cell[0]);
+      const [y0, y1] = cellEdges(y, cell[1]);
+      data.push({
+        type: "scatter",
+        mode: "lines",
+        name: TRACE.active,
+        x: [x0, x1, x1, x0, x0],
+        y: [y0, y0, y1, y1, y0],
+        hoverinfo: "skip",
+        showlegend: false,
+        line: { color: t.activeCell, width: 2.5 },
+      });
     }
     if (frame.outlines) {
       // One trace for every outlined cell: a closed brick each, separated by gaps (null).
       const ox = [];
       const oy = [];
       for (const [i, j] of frame.outlines) {
-        const [x0, x1] = brick(x, i);
-        const [y0, y1] = brick(y, j);
+        const [x0, x1] = cellEdges(x, i);
+        const [y0, y1] = cellEdges(y, j);
         ox.push(x0, x1, x1, x0, x0, null);
         oy.push(y0, y0, y1, y1, y0, null);
       }
-      data.push({ type: "scatter", mode: "lines", name: TRACE.outlines, x: ox, y: oy, hoverinfo: "skip", showlegend: false,
-        connectgaps: false, line: { color: t.outline, width: 2.5 } });
+      data.push({
+        type: "scatter",
+        mode: "lines",
+        name: TRACE.outlines,
+        x: ox,
+        y: oy,
+        hoverinfo: "skip",
+        showlegend: false,
+        connectgaps: false,
+        line: { color: t.outline, width: 2.5 },
+      });
     }
     const layout = baseLayout({
-      xaxis: axis(withUnit(a0.name, a0.unit), { range: edges(x), autorange: false, showgrid: false, zeroline: false }),
-      yaxis: axis(withUnit(a1.name, a1.unit), { range: edges(y), autorange: false, showgrid: false, zeroline: false }),
+      xaxis: axis(withUnit(a0.name, a0.unit), {
+        range: outerEdges(x),
+        autorange: false,
+        showgrid: false,
+        zeroline: false,
+      }),
+      yaxis: axis(withUnit(a1.name, a1.unit), {
+        range: outerEdges(y),
+        autorange: false,
+        showgrid: false,
+        zeroline: false,
+      }),
       margin: { l: 62, r: 8, t: 10, b: 46 },
       font: { family: t.font, size: 12, color: t.text2 },
     });
@@ -337,10 +441,15 @@ export class MapPlot {
     const data = [
       {
         type: "surface",
-        x: a0.breakpoints, y: a1.breakpoints, z: transpose(z),
+        x: a0.breakpoints,
+        y: a1.breakpoints,
+        z: transpose(z),
         customdata: cellText(frame),
         hovertemplate: this.hover(frame.axes, frame.sliceText),
-        colorscale: this.scale(), cmin: this.range?.[0], cmax: this.range?.[1], cauto: false,
+        colorscale: this.scale(),
+        cmin: this.range?.[0],
+        cmax: this.range?.[1],
+        cauto: false,
         colorbar: this.colorbar(),
         contours: { z: { show: false } },
         lighting: { ambient: 0.75, diffuse: 0.6, roughness: 0.6, specular: 0.15 },
@@ -349,32 +458,68 @@ export class MapPlot {
     const trail = frame.trail;
     if (trail?.x?.length) {
       const zs = trail.x.map((xv, k) => interp2(frame.axes, frame.values, xv, trail.y[k]));
-      data.push({ type: "scatter3d", mode: "lines", name: TRACE.trail, x: trail.x, y: trail.y, z: zs, hoverinfo: "skip",
-        showlegend: false, line: { color: t.trail, width: 3 } });
-      data.push({ type: "scatter3d", mode: "markers", name: TRACE.point, x: [trail.x.at(-1)], y: [trail.y.at(-1)], z: [zs.at(-1)],
-        showlegend: false, hoverinfo: "skip", marker: { size: 5, color: t.trail, line: { color: t.trailEdge, width: 1 } } });
+      data.push({
+        type: "scatter3d",
+        mode: "lines",
+        name: TRACE.trail,
+        x: trail.x,
+        y: trail.y,
+        z: zs,
+        hoverinfo: "skip",
+        showlegend: false,
+        line: { color: t.trail, width: 3 },
+      });
+      data.push({
+        type: "scatter3d",
+        mode: "markers",
+        name: TRACE.point,
+        x: [trail.x.at(-1)],
+        y: [trail.y.at(-1)],
+        z: [zs.at(-1)],
+        showlegend: false,
+        hoverinfo: "skip",
+        marker: { size: 5, color: t.trail, line: { color: t.trailEdge, width: 1 } },
+      });
     }
     const cell = frame.activeCell;
     if (cell && cell.length >= 2) {
       // The active cell's brick outlined on the surface, lifted a little so it stays visible.
-      const [x0, x1] = brick(a0.breakpoints, cell[0]);
-      const [y0, y1] = brick(a1.breakpoints, cell[1]);
+      const [x0, x1] = cellEdges(a0.breakpoints, cell[0]);
+      const [y0, y1] = cellEdges(a1.breakpoints, cell[1]);
       const lift = this.range ? (this.range[1] - this.range[0]) * 0.01 : 0;
       const xs = [];
       const ys = [];
-      for (const [xa, ya, xb, yb] of [[x0, y0, x1, y0], [x1, y0, x1, y1], [x1, y1, x0, y1], [x0, y1, x0, y0]]) {
+      for (const [xa, ya, xb, yb] of [
+        [x0, y0, x1, y0],
+        [x1, y0, x1, y1],
+        [x1, y1, x0, y1],
+        [x0, y1, x0, y0],
+      ]) {
         for (let k = 0; k <= 6; k += 1) {
           xs.push(xa + ((xb - xa) * k) / 6);
           ys.push(ya + ((yb - ya) * k) / 6);
         }
       }
       const zs = xs.map((xv, k) => interp2(frame.axes, frame.values, xv, ys[k]) + lift);
-      data.push({ type: "scatter3d", mode: "lines", name: TRACE.active, x: xs, y: ys, z: zs, hoverinfo: "skip",
-        showlegend: false, line: { color: t.activeCell, width: 6 } });
+      data.push({
+        type: "scatter3d",
+        mode: "lines",
+        name: TRACE.active,
+        x: xs,
+        y: ys,
+        z: zs,
+        hoverinfo: "skip",
+        showlegend: false,
+        line: { color: t.activeCell, width: 6 },
+      });
     }
     const sceneAxis = (title) => ({
-      title: { text: title, font: { size: 11, color: t.text2 } }, gridcolor: t.grid, zerolinecolor: t.line,
-      backgroundcolor: "rgba(0,0,0,0)", showbackground: false, tickfont: { size: 10, color: t.text3 },
+      title: { text: title, font: { size: 11, color: t.text2 } },
+      gridcolor: t.grid,
+      zerolinecolor: t.line,
+      backgroundcolor: "rgba(0,0,0,0)",
+      showbackground: false,
+      tickfont: { size: 10, color: t.text3 },
     });
     const layout = baseLayout({
       margin: { l: 0, r: 0, t: 0, b: 0 },
@@ -383,7 +528,8 @@ export class MapPlot {
         yaxis: sceneAxis(withUnit(a1.name, a1.unit)),
         zaxis: { ...sceneAxis(withUnit(this.label, this.unit)), range: this.range ?? undefined },
         camera: { eye: { x: 1.55, y: -1.55, z: 0.95 } },
-        aspectmode: "manual", aspectratio: { x: 1, y: 1, z: 0.6 },
+        aspectmode: "manual",
+        aspectratio: { x: 1, y: 1, z: 0.6 },
       },
     });
     return [data, layout];
@@ -397,97 +543,67 @@ export class MapPlot {
     if (this.kind === "value" && frame.variances) {
       const sd = frame.variances.map((v) => (v === null ? null : Math.sqrt(Math.max(v, 0))));
       data.push(
-        { x, y: z.map((v, k) => (v === null || sd[k] === null ? null : v + 2 * sd[k])), mode: "lines",
-          line: { width: 0 }, hoverinfo: "skip", showlegend: false },
-        { x, y: z.map((v, k) => (v === null || sd[k] === null ? null : v - 2 * sd[k])), mode: "lines",
-          line: { width: 0 }, fill: "tonexty", fillcolor: withAlpha(t.accent, 0.18), hoverinfo: "skip", name: "±2σ" },
+        {
+          x,
+          y: z.map((v, k) => (v === null || sd[k] === null ? null : v + 2 * sd[k])),
+          mode: "lines",
+          line: { width: 0 },
+          hoverinfo: "skip",
+          showlegend: false,
+        },
+        {
+          x,
+          y: z.map((v, k) => (v === null || sd[k] === null ? null : v - 2 * sd[k])),
+          mode: "lines",
+          line: { width: 0 },
+          fill: "tonexty",
+          fillcolor: withAlpha(t.accent, 0.18),
+          hoverinfo: "skip",
+          name: "±2σ",
+        },
       );
     }
     data.push({
-      x, y: this.kind === "variance" ? (frame.variances ?? []) : z, mode: "lines+markers", name: this.label,
-      customdata: cellText(frame), hovertemplate: this.hover(frame.axes),
-      line: { color: DIVERGING.has(this.kind) ? t.danger : t.accent, width: 2 }, marker: { size: 6 },
+      x,
+      y: this.kind === "variance" ? (frame.variances ?? []) : z,
+      mode: "lines+markers",
+      name: this.label,
+      customdata: cellText(frame),
+      hovertemplate: this.hover(frame.axes),
+      line: { color: DIVERGING.has(this.kind) ? t.danger : t.accent, width: 2 },
+      marker: { size: 6 },
       type: DIVERGING.has(this.kind) ? "bar" : "scatter",
     });
     const trail = frame.trail;
     if (trail?.x?.length && this.kind === "value") {
       const xv = trail.x.at(-1);
-      data.push({ x: [xv], y: [interp1(x, z, xv)], mode: "markers", name: TRACE.point, showlegend: false, hoverinfo: "skip",
-        marker: { size: 11, color: t.activeCell, line: { color: t.trailEdge, width: 2 } } });
+      data.push({
+        x: [xv],
+        y: [interp1(x, z, xv)],
+        mode: "markers",
+        name: TRACE.point,
+        showlegend: false,
+        hoverinfo: "skip",
+        marker: { size: 11, color: t.activeCell, line: { color: t.trailEdge, width: 2 } },
+      });
     }
     const layout = baseLayout({
       xaxis: axis(withUnit(a0.name, a0.unit)),
-      yaxis: axis(this.kind === "variance" ? "variance" : withUnit(this.label, this.unit),
-        this.kind === "variance" ? { type: "log" } : this.range ? { range: pad(this.range) } : {}),
+      yaxis: axis(
+        this.kind === "variance" ? "variance" : withUnit(this.label, this.unit),
+        this.kind === "variance"
+          ? { type: "log" }
+          : this.range
+            ? { range: padRange(this.range) }
+            : {},
+      ),
       showlegend: false,
     });
     return [data, layout];
   }
 }
 
-/**
- * A colour range on "nice" bounds around [lo, hi] (whole decades for log-coded variances):
- * the same values always give the same range.
- */
-export function niceRange(lo, hi, { log = false } = {}) {
-  if (!(Number.isFinite(lo) && Number.isFinite(hi))) return null;
-  if (log) {
-    const a = Math.floor(lo);
-    const b = Math.ceil(hi);
-    return [a, b > a ? b : a + 1];
-  }
-  if (hi <= lo) {
-    const pad = Math.abs(hi) * 0.05 || 1;
-    lo -= pad;
-    hi += pad;
-  }
-  const step = niceStep(hi - lo, 10);
-  return [Math.floor(lo / step) * step, Math.ceil(hi / step) * step];
-}
-
 /* ---------- helpers ---------- */
-
-function pad([lo, hi]) {
-  const d = (hi - lo) * 0.08 || 1;
-  return [lo - d, hi + d];
-}
-
-/** Edges of the heatmap brick drawn for breakpoint k (half-way to its neighbours). */
-function brick(bp, k) {
-  const i = Math.max(0, Math.min(bp.length - 1, k));
-  const lo = i > 0 ? (bp[i - 1] + bp[i]) / 2 : bp[0] - (bp.length > 1 ? (bp[1] - bp[0]) / 2 : 1);
-  const hi = i < bp.length - 1 ? (bp[i] + bp[i + 1]) / 2 : bp[i] + (bp.length > 1 ? (bp[i] - bp[i - 1]) / 2 : 1);
-  return [lo, hi];
-}
-
-/** Plot range reaching half a cell beyond the outer breakpoints. */
-function edges(bp) {
-  if (bp.length < 2) return [bp[0] - 1, bp[0] + 1];
-  return [bp[0] - (bp[1] - bp[0]) / 2, bp.at(-1) + (bp.at(-1) - bp.at(-2)) / 2];
-}
-
-/** Index of the breakpoint nearest to v. */
-function nearest(bp, v) {
-  let best = 0;
-  for (let i = 1; i < bp.length; i += 1) if (Math.abs(bp[i] - v) < Math.abs(bp[best] - v)) best = i;
-  return best;
-}
-
-/** m[i][j][k][l]… → m[i][j] at the given indices of the axes beyond the second. */
-export function sliceNested(m, idx) {
-  if (!Array.isArray(m)) return m;
-  return m.map((row) => row.map((cell) => idx.reduce((c, k) => (Array.isArray(c) ? c[k] ?? null : null), cell)));
-}
-
-/** values[i][j] (i along axis 0 = x) → z[j][i] (Plotly rows are y). */
-export function transpose(m) {
-  if (!Array.isArray(m[0])) return m;
-  return m[0].map((_, j) => m.map((row) => row[j]));
-}
-
-export function logNested(m) {
-  return Array.isArray(m) ? m.map((v) => (Array.isArray(v) ? logNested(v) : v === null ? null : Math.log10(Math.max(v, TINY)))) : m;
-}
 
 /** Hover text per cell: [value, variance, visits], already formatted, laid out like the z grid. */
 function cellText(frame) {
@@ -511,99 +627,4 @@ function quick(v, digits) {
   const abs = Math.abs(v);
   if (abs !== 0 && (abs >= 1e6 || abs < 1e-3)) return v.toExponential(digits - 1);
   return String(Number(v.toPrecision(digits)));
-}
-
-function locate(bp, x) {
-  let i = 0;
-  while (i < bp.length - 2 && x > bp[i + 1]) i += 1;
-  const span = bp[i + 1] - bp[i] || 1;
-  const w = Math.min(1, Math.max(0, (x - bp[i]) / span));
-  return [i, w];
-}
-
-export function interp1(bp, v, x) {
-  if (bp.length < 2) return v[0];
-  const [i, w] = locate(bp, x);
-  return (1 - w) * v[i] + w * v[i + 1];
-}
-
-/** Bilinear interpolation of a 2-D table (the table's own model), clamped at the edges. */
-export function interp2(axes, values, x, y) {
-  const [i, wx] = locate(axes[0].breakpoints, x);
-  const [j, wy] = locate(axes[1].breakpoints, y);
-  const v = (a, b) => values[Math.min(a, values.length - 1)][Math.min(b, values[0].length - 1)];
-  return (1 - wx) * (1 - wy) * v(i, j) + wx * (1 - wy) * v(i + 1, j) + (1 - wx) * wy * v(i, j + 1) + wx * wy * v(i + 1, j + 1);
-}
-
-/** Element-wise b − a of two nested tables of the same shape (null where either is null). */
-export function diffNested(a, b) {
-  return a.map((row, i) => (Array.isArray(row) ? diffNested(row, b[i]) : row === null || b[i] === null ? null : b[i] - row));
-}
-
-export function sameGrid(axesA, axesB) {
-  return axesA.length === axesB.length && axesA.every((ax, k) =>
-    ax.breakpoints.length === axesB[k].breakpoints.length &&
-    ax.breakpoints.every((v, i) => Math.abs(v - axesB[k].breakpoints[i]) <= 1e-9 * Math.max(1, Math.abs(v))));
-}
-
-/* ---------- HTML colour bar ---------- */
-
-class ColorBar {
-  constructor(plotEl, kind) {
-    const wrap = h("div", { class: "mapplot" });
-    plotEl.parentElement.insertBefore(wrap, plotEl);
-    wrap.append(plotEl);
-    this.wrap = wrap;
-    this.el = h("div", { class: "cbar", "aria-hidden": "true", dataset: { colorbarFor: plotEl.dataset.plot ?? kind } });
-    wrap.append(this.el);
-    this.key = "";
-  }
-
-  clear() {
-    this.el.replaceChildren();
-    this.key = "";
-  }
-
-  draw({ scale, range, log, title, top, height, clipped = { lo: false, hi: false } }) {
-    if (!range) return;
-    const key = JSON.stringify([range, log, title, top, height, scale[0][1], clipped]);
-    if (key === this.key) return;
-    this.key = key;
-    const [lo, hi] = range;
-    const ticks = log ? logTicks(lo, hi) : linearTicks(lo, hi);
-    const stops = scale.map(([p, c]) => `${c} ${(p * 100).toFixed(1)}%`).join(", ");
-    const frac = (v) => (hi > lo ? (v - lo) / (hi - lo) : 0.5);
-    const grad = h("div", { class: "cbar-grad", style: { background: `linear-gradient(to top, ${stops})`,
-      top: `${top}px`, height: height ? `${height}px` : "80%" } },
-      ticks.filter((t) => t.v >= lo - 1e-12 && t.v <= hi + 1e-12).map((t) =>
-        h("span", { class: "cbar-tick", style: { bottom: `${(100 * frac(t.v)).toFixed(2)}%` } }, t.label)));
-    // Cells beyond a pinned range are drawn in the end colour; an arrow says so.
-    const clip = (end) => h("span", { class: `cbar-clip ${end}`, title: `some cells are ${end === "hi" ? "above" : "below"} the scale` },
-      end === "hi" ? "▲" : "▼");
-    if (clipped.hi) grad.append(clip("hi"));
-    if (clipped.lo) grad.append(clip("lo"));
-    this.el.replaceChildren(h("div", { class: "cbar-title" }, title || "\u00a0"), grad);
-  }
-}
-
-function niceStep(span, count = 5) {
-  const raw = span / count;
-  const mag = 10 ** Math.floor(Math.log10(raw));
-  return [1, 2, 2.5, 5, 10].map((m) => m * mag).find((st) => st >= raw) ?? raw;
-}
-
-function linearTicks(lo, hi) {
-  if (!(hi > lo)) return [{ v: lo, label: fmt(lo, 3) }];
-  const step = niceStep(hi - lo);
-  const out = [];
-  for (let v = Math.ceil(lo / step) * step; v <= hi + step * 1e-9; v += step) {
-    const r = Math.abs(v) < step * 1e-9 ? 0 : Number(v.toPrecision(12));
-    out.push({ v: r, label: fmt(r, 3) });
-  }
-  return out;
-}
-
-function logTicks(lo, hi) {
-  const { tickvals, ticktext } = decadeTicks(lo, hi);
-  return tickvals.map((v, k) => ({ v, label: ticktext[k] }));
 }

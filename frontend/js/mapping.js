@@ -11,7 +11,10 @@ export function rolesOf(est) {
   return (est?.signals ?? []).filter((s) => s && s.role);
 }
 
-const normal = (s) => String(s ?? "").toLowerCase().replace(/[^a-z0-9]+/g, "");
+const normal = (s) =>
+  String(s ?? "")
+    .toLowerCase()
+    .replace(/[^a-z0-9]+/g, "");
 
 /** The most plausible column for a role: same name, name containing the role, then unit. */
 export function guessColumn(role, channels, taken = new Set()) {
@@ -20,27 +23,37 @@ export function guessColumn(role, channels, taken = new Set()) {
   const base = r.replace(/channel$/, "");
   const unit = normal(role.unit);
   return (
-    free.find((c) => role.default && c.name === role.default) ||
-    free.find((c) => normal(c.name) === r) ||
-    free.find((c) => base && normal(c.name).startsWith(base)) ||
-    free.find((c) => base && normal(c.name).includes(base)) ||
-    free.find((c) => unit && normal(c.unit) === unit) ||
-    null
-  )?.name ?? null;
+    (
+      free.find((c) => role.default && c.name === role.default) ||
+      free.find((c) => normal(c.name) === r) ||
+      free.find((c) => base && normal(c.name).startsWith(base)) ||
+      free.find((c) => base && normal(c.name).includes(base)) ||
+      free.find((c) => unit && normal(c.unit) === unit) ||
+      null
+    )?.name ?? null
+  );
 }
 
 /** Output and axes for a table filter: the last channel is usually the measured output. */
 export function guessTable(channels) {
   const usable = channels.filter((c) => !/^time|^t$/i.test(c.name));
   if (!usable.length) return { y: null, axes: [] };
-  const y = usable.find((c) => /^y$|nox|output|lambda|maf|measured/i.test(c.name))?.name ?? usable.at(-1).name;
-  const axes = usable.filter((c) => c.name !== y).slice(0, 2).map((c) => c.name);
+  const y =
+    usable.find((c) => /^y$|nox|output|lambda|maf|measured/i.test(c.name))?.name ??
+    usable.at(-1).name;
+  const axes = usable
+    .filter((c) => c.name !== y)
+    .slice(0, 2)
+    .map((c) => c.name);
   return { y, axes };
 }
 
 /** "y:nox_ppm,speed:speed_rpm" ⇄ {y: "nox_ppm", speed: "speed_rpm"} (for URLs). */
 export function encodeSignals(signals) {
-  return Object.entries(signals).filter(([, v]) => v).map(([k, v]) => `${k}:${v}`).join(",");
+  return Object.entries(signals)
+    .filter(([, v]) => v)
+    .map(([k, v]) => `${k}:${v}`)
+    .join(",");
 }
 
 export function decodeSignals(text) {

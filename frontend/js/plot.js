@@ -49,7 +49,13 @@ export const CONFIG = Object.freeze({
   displaylogo: false,
   responsive: true,
   scrollZoom: false,
-  modeBarButtonsToRemove: ["lasso2d", "select2d", "autoScale2d", "toggleSpikelines", "sendDataToCloud"],
+  modeBarButtonsToRemove: [
+    "lasso2d",
+    "select2d",
+    "autoScale2d",
+    "toggleSpikelines",
+    "sendDataToCloud",
+  ],
   toImageButtonOptions: { format: "png", scale: 2 },
 });
 
@@ -92,7 +98,16 @@ export function withAlpha(color, alpha) {
 }
 
 /** Series colours that stay distinguishable on both themes. */
-export const SERIES_COLORS = ["#3b82f6", "#f59e0b", "#10b981", "#ef4444", "#8b5cf6", "#06b6d4", "#ec4899", "#84cc16"];
+export const SERIES_COLORS = [
+  "#3b82f6",
+  "#f59e0b",
+  "#10b981",
+  "#ef4444",
+  "#8b5cf6",
+  "#06b6d4",
+  "#ec4899",
+  "#84cc16",
+];
 
 export function axis(title, extra = {}) {
   const t = theme();
@@ -114,8 +129,19 @@ export function baseLayout(extra = {}) {
     plot_bgcolor: "rgba(0,0,0,0)",
     font: { family: t.font, size: 12, color: t.text2 },
     margin: { l: 56, r: 16, t: 12, b: 44 },
-    hoverlabel: { font: { family: t.font, size: 12, color: t.text }, bgcolor: t.surface, bordercolor: t.line },
-    legend: { orientation: "h", x: 0, y: 1.02, yanchor: "bottom", font: { size: 11.5 }, bgcolor: "rgba(0,0,0,0)" },
+    hoverlabel: {
+      font: { family: t.font, size: 12, color: t.text },
+      bgcolor: t.surface,
+      bordercolor: t.line,
+    },
+    legend: {
+      orientation: "h",
+      x: 0,
+      y: 1.02,
+      yanchor: "bottom",
+      font: { size: 11.5 },
+      bgcolor: "rgba(0,0,0,0)",
+    },
     uirevision: "keep",
     ...extra,
   };
@@ -131,7 +157,8 @@ let revision = 0;
 export function react(el, data, layout, config = CONFIG) {
   revision += 1;
   layout = { ...layout, datarevision: revision };
-  if (globalThis.Plotly && el.isConnected && !waiting.has(el)) return globalThis.Plotly.react(el, data, layout, config);
+  if (globalThis.Plotly && el.isConnected && !waiting.has(el))
+    return globalThis.Plotly.react(el, data, layout, config);
   return later(el, [data, layout, config]);
 }
 
@@ -209,20 +236,46 @@ export function hasWebGL() {
 
 /* ---------- colour scales ---------- */
 export const SCALE_VALUE = [
-  [0, "#0d0887"], [0.13, "#41049d"], [0.25, "#6a00a8"], [0.38, "#8f0da4"], [0.5, "#b12a90"],
-  [0.63, "#cc4778"], [0.75, "#e16462"], [0.88, "#f2844b"], [1, "#fcce25"],
+  [0, "#0d0887"],
+  [0.13, "#41049d"],
+  [0.25, "#6a00a8"],
+  [0.38, "#8f0da4"],
+  [0.5, "#b12a90"],
+  [0.63, "#cc4778"],
+  [0.75, "#e16462"],
+  [0.88, "#f2844b"],
+  [1, "#fcce25"],
 ];
 export const SCALE_VIRIDIS = [
-  [0, "#440154"], [0.13, "#482878"], [0.25, "#3e4989"], [0.38, "#31688e"], [0.5, "#26828e"],
-  [0.63, "#1f9e89"], [0.75, "#35b779"], [0.88, "#6ece58"], [1, "#fde725"],
+  [0, "#440154"],
+  [0.13, "#482878"],
+  [0.25, "#3e4989"],
+  [0.38, "#31688e"],
+  [0.5, "#26828e"],
+  [0.63, "#1f9e89"],
+  [0.75, "#35b779"],
+  [0.88, "#6ece58"],
+  [1, "#fde725"],
 ];
 export const SCALE_VARIANCE = [
-  [0, "#000004"], [0.13, "#1c1044"], [0.25, "#4f127b"], [0.38, "#812581"], [0.5, "#b5367a"],
-  [0.63, "#e55064"], [0.75, "#fb8761"], [0.88, "#fec287"], [1, "#fcfdbf"],
+  [0, "#000004"],
+  [0.13, "#1c1044"],
+  [0.25, "#4f127b"],
+  [0.38, "#812581"],
+  [0.5, "#b5367a"],
+  [0.63, "#e55064"],
+  [0.75, "#fb8761"],
+  [0.88, "#fec287"],
+  [1, "#fcfdbf"],
 ];
 export const SCALE_DIFF = [
-  [0, "#2166ac"], [0.2, "#4393c3"], [0.35, "#92c5de"], [0.5, "#f7f7f7"],
-  [0.65, "#f4a582"], [0.8, "#d6604d"], [1, "#b2182b"],
+  [0, "#2166ac"],
+  [0.2, "#4393c3"],
+  [0.35, "#92c5de"],
+  [0.5, "#f7f7f7"],
+  [0.65, "#f4a582"],
+  [0.8, "#d6604d"],
+  [1, "#b2182b"],
 ];
 
 /** Colour-bar ticks for log10-coded z: one per decade, labelled 1e-3 … */

@@ -30,8 +30,12 @@ export class Router {
     const a = event.target.closest?.(SEL.link);
     if (!a || a.target || a.hasAttribute("download")) return;
     const dest = new URL(a.href, window.location.href);
-    if (dest.origin !== window.location.origin || dest.pathname.startsWith("/api/") ||
-        dest.pathname.startsWith("/static/")) return;
+    if (
+      dest.origin !== window.location.origin ||
+      dest.pathname.startsWith("/api/") ||
+      dest.pathname.startsWith("/static/")
+    )
+      return;
     if (!this.match(dest.pathname)) return;
     event.preventDefault();
     this.navigate(dest.pathname + dest.search);
@@ -41,7 +45,9 @@ export class Router {
     for (const route of this.routes) {
       const m = route.path.exec(pathname);
       if (m) {
-        const params = Object.fromEntries((route.keys ?? []).map((k, i) => [k, decodeURIComponent(m[i + 1])]));
+        const params = Object.fromEntries(
+          (route.keys ?? []).map((k, i) => [k, decodeURIComponent(m[i + 1])]),
+        );
         return { route, params };
       }
     }
@@ -65,7 +71,9 @@ export class Router {
       if (v !== undefined && v !== null && v !== "") params.set(k, v);
     }
     const search = params.toString();
-    const to = window.location.pathname + (search ? `?${search.replaceAll("%2C", ",").replaceAll("%3A", ":")}` : "");
+    const to =
+      window.location.pathname +
+      (search ? `?${search.replaceAll("%2C", ",").replaceAll("%3A", ":")}` : "");
     if (replace) history.replaceState(null, "", to);
     else history.pushState(null, "", to);
   }
@@ -119,7 +127,10 @@ function errorPanel(err) {
   const p = document.createElement("div");
   p.className = "banner error";
   p.setAttribute("role", "alert");
-  p.textContent = err?.status === 404 ? `Not found: ${err.message}` : `Something went wrong: ${err?.message ?? err}`;
+  p.textContent =
+    err?.status === 404
+      ? `Not found: ${err.message}`
+      : `Something went wrong: ${err?.message ?? err}`;
   return p;
 }
 

@@ -18,7 +18,17 @@ import { h, parseNumberList, withUnit } from "./dom.js";
  * @param {string} [opts.prefix]    name prefix, default "config"
  * @param {string} [opts.idPrefix]  unique id prefix when several forms share a page
  */
-export function schemaForm(schema, { defaults = {}, values = {}, hide = new Set(), channels = [], prefix = "config", idPrefix = "cfg" } = {}) {
+export function schemaForm(
+  schema,
+  {
+    defaults = {},
+    values = {},
+    hide = new Set(),
+    channels = [],
+    prefix = "config",
+    idPrefix = "cfg",
+  } = {},
+) {
   const readers = [];
   const el = h("div", { class: "schema-form" });
   const root = resolve(schema, schema);
@@ -26,7 +36,8 @@ export function schemaForm(schema, { defaults = {}, values = {}, hide = new Set(
   const simple = [];
   const sections = [];
   for (const [key, prop] of props) {
-    const start = key in values ? values[key] : key in defaults ? defaults[key] : resolve(prop, schema).default;
+    const start =
+      key in values ? values[key] : key in defaults ? defaults[key] : resolve(prop, schema).default;
     const built = control(schema, prop, [key], start, { channels, prefix, idPrefix });
     readers.push([key, built.read]);
     (built.section ? sections : simple).push(built.el);
@@ -63,11 +74,27 @@ function unwrap(prop, schema) {
   if (!options) return { inner: p, nullable: false, alternatives: [] };
   const nonNull = options.map((o) => resolve(o, schema)).filter((o) => o.type !== "null");
   const nullable = nonNull.length < options.length;
-  const merged = { ...nonNull[0], title: p.title, description: p.description ?? nonNull[0]?.description, default: p.default };
+  const merged = {
+    ...nonNull[0],
+    title: p.title,
+    description: p.description ?? nonNull[0]?.description,
+    default: p.default,
+  };
   return { inner: merged, nullable, alternatives: nonNull };
 }
 
-const GREEK = { sigma: "σ", theta: "θ", gamma: "γ", eps: "ε", kappa: "κ", mu: "μ", lambda: "λ", ell: "ℓ", rho: "ρ", tau: "τ" };
+const GREEK = {
+  sigma: "σ",
+  theta: "θ",
+  gamma: "γ",
+  eps: "ε",
+  kappa: "κ",
+  mu: "μ",
+  lambda: "λ",
+  ell: "ℓ",
+  rho: "ρ",
+  tau: "τ",
+};
 
 /** Label of a property: its own title unless that is just the key, then the key with symbols. */
 function titleOf(key, p) {
@@ -89,14 +116,21 @@ function control(schema, prop, path, start, opts) {
   const id = `${opts.idPrefix}-${path.join("-")}`.replace(/[^\w-]/g, "_");
   const label = titleOf(key, inner);
   const help = inner.description ?? "";
-  const numberOrArray = alternatives.some((a) => a.type === "array") && alternatives.some((a) => a.type === "number" || a.type === "integer");
+  const numberOrArray =
+    alternatives.some((a) => a.type === "array") &&
+    alternatives.some((a) => a.type === "number" || a.type === "integer");
 
-  if (inner.type === "object" && inner.properties) return objectControl(schema, inner, path, start, nullable, opts, { name, label, help });
+  if (inner.type === "object" && inner.properties)
+    return objectControl(schema, inner, path, start, nullable, opts, { name, label, help });
 
   let input;
   let read;
   if (inner.enum) {
-    input = h("select", { id, name }, inner.enum.map((v) => h("option", { value: String(v), selected: v === start }, String(v))));
+    input = h(
+      "select",
+      { id, name },
+      inner.enum.map((v) => h("option", { value: String(v), selected: v === start }, String(v))),
+    );
     read = () => {
       const raw = input.value;
       const found = inner.enum.find((v) => String(v) === raw);
@@ -105,16 +139,38 @@ function control(schema, prop, path, start, opts) {
   } else if (inner.type === "boolean") {
     input = h("input", { type: "checkbox", id, name, checked: Boolean(start) });
     read = () => input.checked;
-    return wrap(h("label", { class: "check", for: id }, input, label), help, key, { checkbox: true, read });
+    return wrap(h("label", { class: "check", for: id }, input, label), help, key, {
+      checkbox: true,
+      read,
+    });
   } else if (inner.type === "string" && /_channel$/.test(key) && opts.channels.length) {
-    input = h("select", { id, name },
-      opts.channels.some((c) => c.name === start) ? null : h("option", { value: start ?? "" }, start ? `${start} (not in dataset)` : "—"),
-      opts.channels.map((c) => h("option", { value: c.name, selected: c.name === start }, withUnit(c.name, c.unit))));
+    input = h(
+      "select",
+      { id, name },
+      opts.channels.some((c) => c.name === start)
+        ? null
+        : h("option", { value: start ?? "" }, start ? `${start} (not in dataset)` : "—"),
+      opts.channels.map((c) =>
+        h("option", { value: c.name, selected: c.name === start }, withUnit(c.name, c.unit)),
+      ),
+    );
     read = () => input.value || undefined;
   } else if (inner.type === "array" || numberOrArray) {
-    const text = Array.isArray(start) ? start.join(", ") : start ?? "";
-    input = h("input", { type: "text", id, name, value: String(text), class: "mono", inputmode: "decimal", autocomplete: "off",
-      placeholder: nullable ? "auto" : numberOrArray ? "a number, or one per cell" : "comma-separated numbers" });
+    const text = Array.isArray(start) ? start.join(", ") : (start ?? "");
+    input = h("input", {
+      type: "text",
+      id,
+      name,
+      value: String(text),
+      class: "mono",
+      inputmode: "decimal",
+      autocomplete: "off",
+      placeholder: nullable
+        ? "auto"
+        : numberOrArray
+          ? "a number, or one per cell"
+          : "comma-separated numbers",
+    });
     read = () => {
       const raw = input.value.trim();
       if (!raw) return nullable ? null : undefined;
@@ -128,46 +184,82 @@ function control(schema, prop, path, start, opts) {
       return list;
     };
   } else if (inner.type === "number" || inner.type === "integer") {
-    input = h("input", { type: "number", id, name, step: inner.type === "integer" ? "1" : "any", autocomplete: "off",
-      value: start === null || start === undefined ? "" : String(start), placeholder: nullable ? "none" : "",
-      min: inner.minimum ?? null, max: inner.maximum ?? null });
+    input = h("input", {
+      type: "number",
+      id,
+      name,
+      step: inner.type === "integer" ? "1" : "any",
+      autocomplete: "off",
+      value: start === null || start === undefined ? "" : String(start),
+      placeholder: nullable ? "none" : "",
+      min: inner.minimum ?? null,
+      max: inner.maximum ?? null,
+    });
     read = () => {
       const raw = input.value.trim();
       if (raw === "") return nullable ? null : undefined;
       const v = Number(raw);
-      if (!Number.isFinite(v)) throw Object.assign(new Error(`${label}: "${raw}" is not a number`), { field: name });
+      if (!Number.isFinite(v))
+        throw Object.assign(new Error(`${label}: "${raw}" is not a number`), { field: name });
       const problem = outOfBounds(inner, v);
-      if (problem) throw Object.assign(new Error(`${label}: must be ${problem}, got ${raw}`), { field: name });
+      if (problem)
+        throw Object.assign(new Error(`${label}: must be ${problem}, got ${raw}`), { field: name });
       return v;
     };
   } else {
-    input = h("input", { type: "text", id, name, value: start ?? "", autocomplete: "off", placeholder: nullable ? "none" : "" });
+    input = h("input", {
+      type: "text",
+      id,
+      name,
+      value: start ?? "",
+      autocomplete: "off",
+      placeholder: nullable ? "none" : "",
+    });
     read = () => (input.value === "" ? (nullable ? null : undefined) : input.value);
   }
-  return wrap(h("label", { for: id }, label, " ", h("code", { class: "help" }, key)), help, key, { input, read, range: rangeText(inner) });
+  return wrap(h("label", { for: id }, label, " ", h("code", { class: "help" }, key)), help, key, {
+    input,
+    read,
+    range: rangeText(inner),
+  });
 }
 
 /** The bound of a JSON-schema number that v breaks, in words (as pydantic says it), or null. */
 function outOfBounds(p, v) {
   if (p.type === "integer" && !Number.isInteger(v)) return "a whole number";
-  if (p.exclusiveMinimum !== undefined && !(v > p.exclusiveMinimum)) return `greater than ${p.exclusiveMinimum}`;
+  if (p.exclusiveMinimum !== undefined && !(v > p.exclusiveMinimum))
+    return `greater than ${p.exclusiveMinimum}`;
   if (p.minimum !== undefined && !(v >= p.minimum)) return `greater than or equal to ${p.minimum}`;
-  if (p.exclusiveMaximum !== undefined && !(v < p.exclusiveMaximum)) return `less than ${p.exclusiveMaximum}`;
+  if (p.exclusiveMaximum !== undefined && !(v < p.exclusiveMaximum))
+    return `less than ${p.exclusiveMaximum}`;
   if (p.maximum !== undefined && !(v <= p.maximum)) return `less than or equal to ${p.maximum}`;
   return null;
 }
 
 function rangeText(p) {
-  const lo = p.minimum !== undefined ? `≥ ${p.minimum}` : p.exclusiveMinimum !== undefined ? `> ${p.exclusiveMinimum}` : "";
-  const hi = p.maximum !== undefined ? `≤ ${p.maximum}` : p.exclusiveMaximum !== undefined ? `< ${p.exclusiveMaximum}` : "";
+  const lo =
+    p.minimum !== undefined
+      ? `≥ ${p.minimum}`
+      : p.exclusiveMinimum !== undefined
+        ? `> ${p.exclusiveMinimum}`
+        : "";
+  const hi =
+    p.maximum !== undefined
+      ? `≤ ${p.maximum}`
+      : p.exclusiveMaximum !== undefined
+        ? `< ${p.exclusiveMaximum}`
+        : "";
   return [lo, hi].filter(Boolean).join(", ");
 }
 
 function wrap(labelEl, help, key, { input, read, checkbox = false, range = "" }) {
-  const el = h("div", { class: "field", dataset: { key } },
+  const el = h(
+    "div",
+    { class: "field", dataset: { key } },
     labelEl,
     checkbox ? null : input,
-    help || range ? h("div", { class: "help" }, help, range ? ` (${range})` : "") : null);
+    help || range ? h("div", { class: "help" }, help, range ? ` (${range})` : "") : null,
+  );
   return { el, read, section: false };
 }
 
@@ -183,20 +275,32 @@ function objectControl(schema, inner, path, start, nullable, opts, { name, label
     fields.push(built.el);
   }
   const body = h("div", { class: "fields" }, fields);
-  const fieldset = h("fieldset", { "data-field": name },
+  const fieldset = h(
+    "fieldset",
+    { "data-field": name },
     h("legend", {}, label),
     help ? h("div", { class: "help", style: { marginBottom: "8px" } }, help) : null,
-    body);
+    body,
+  );
   let toggle = null;
   if (nullable) {
-    toggle = h("input", { type: "checkbox", id, checked: start !== null && start !== undefined, "aria-controls": `${id}-body` });
+    toggle = h("input", {
+      type: "checkbox",
+      id,
+      checked: start !== null && start !== undefined,
+      "aria-controls": `${id}-body`,
+    });
     body.id = `${id}-body`;
     const sync = () => {
       body.hidden = !toggle.checked;
     };
     toggle.addEventListener("change", sync);
     sync();
-    fieldset.querySelector(SEL.legend).replaceChildren(h("label", { class: "check", for: id }, toggle, `Use ${label.toLowerCase()}`));
+    fieldset
+      .querySelector(SEL.legend)
+      .replaceChildren(
+        h("label", { class: "check", for: id }, toggle, `Use ${label.toLowerCase()}`),
+      );
   }
   const read = () => {
     if (toggle && !toggle.checked) return null;
@@ -222,11 +326,17 @@ export function sweepableKeys(schema, { hide = new Set() } = {}) {
       if (!path.length && hide.has(key)) continue;
       const { inner, alternatives } = unwrap(prop, schema);
       const full = [...path, key];
-      const label = path.length ? `${path.map(humanise).join(" › ")} › ${titleOf(key, inner)}` : titleOf(key, inner);
-      const numeric = [inner, ...alternatives].find((a) => a.type === "number" || a.type === "integer");
+      const label = path.length
+        ? `${path.map(humanise).join(" › ")} › ${titleOf(key, inner)}`
+        : titleOf(key, inner);
+      const numeric = [inner, ...alternatives].find(
+        (a) => a.type === "number" || a.type === "integer",
+      );
       if (inner.type === "object" && inner.properties) walk(inner, full);
-      else if (inner.enum) out.push({ key: full.join("."), label, type: "enum", options: inner.enum, bounds: "" });
-      else if (numeric) out.push({ key: full.join("."), label, type: numeric.type, bounds: rangeText(numeric) });
+      else if (inner.enum)
+        out.push({ key: full.join("."), label, type: "enum", options: inner.enum, bounds: "" });
+      else if (numeric)
+        out.push({ key: full.join("."), label, type: numeric.type, bounds: rangeText(numeric) });
     }
   };
   walk(resolve(schema, schema), []);

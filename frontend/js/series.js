@@ -39,7 +39,8 @@ export class SeriesStore {
   /** Append the new points of a delta. */
   append(series) {
     for (const [name, s] of Object.entries(series ?? {})) {
-      const cur = this.data[name] ?? (this.data[name] = { unit: s.unit ?? "", time: [], values: [] });
+      const cur =
+        this.data[name] ?? (this.data[name] = { unit: s.unit ?? "", time: [], values: [] });
       if (s.unit) cur.unit = s.unit;
       const t = s.time ?? [];
       const v = s.values ?? [];
@@ -64,7 +65,8 @@ export class SeriesStore {
    * (NAME_true) and "error" (NAME_error). Returns {name, unit, time, values} or null.
    */
   pick(quantity) {
-    const get = (key) => (key && this.data[key]?.values?.length ? { name: key, ...this.data[key] } : null);
+    const get = (key) =>
+      key && this.data[key]?.values?.length ? { name: key, ...this.data[key] } : null;
     if (quantity in SERIES) return get(SERIES[quantity]);
     const scored = this.scored();
     if (!scored) return null;

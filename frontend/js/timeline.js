@@ -22,37 +22,107 @@ export class VersionTimeline {
    * @param {number|null} [opts.initialVersion] version id to show first (e.g. from the URL)
    * @param {(version: object|null) => void} [opts.onScrub] a version was picked (null: back to live/final)
    */
-  constructor({ runId, isLive, onShow, onLive, onList, baseMapName, initialVersion = null, onScrub = null }) {
-    Object.assign(this, { runId, isLive, onShow, onLive, onList, baseMapName, initialVersion, onScrub });
+  constructor({
+    runId,
+    isLive,
+    onShow,
+    onLive,
+    onList,
+    baseMapName,
+    initialVersion = null,
+    onScrub = null,
+  }) {
+    Object.assign(this, {
+      runId,
+      isLive,
+      onShow,
+      onLive,
+      onList,
+      baseMapName,
+      initialVersion,
+      onScrub,
+    });
     this.versions = [];
     this.docs = new Map();
     this.viewing = null;
     this.showingInitial = false;
     this.playing = 0;
 
-    this.slider = h("input", { type: "range", id: "version-slider", min: "0", max: "0", value: "0", step: "1",
-      "aria-label": "Map version", "data-version-slider": "" });
-    this.playButton = h("button", { type: "button", class: "icon", "aria-label": "Play the map's evolution", "data-play": "",
-      onclick: () => this.togglePlay() }, icon(ICONS.play, { filled: true }));
+    this.slider = h("input", {
+      type: "range",
+      id: "version-slider",
+      min: "0",
+      max: "0",
+      value: "0",
+      step: "1",
+      "aria-label": "Map version",
+      "data-version-slider": "",
+    });
+    this.playButton = h(
+      "button",
+      {
+        type: "button",
+        class: "icon",
+        "aria-label": "Play the map's evolution",
+        "data-play": "",
+        onclick: () => this.togglePlay(),
+      },
+      icon(ICONS.play, { filled: true }),
+    );
     this.where = h("div", { class: "where", "aria-live": "polite", "data-version-where": "" });
     this.ticks = h("div", { class: "timeline-ticks", "aria-hidden": "true" });
-    this.liveButton = h("button", { type: "button", class: "small", hidden: true, "data-live": "",
-      onclick: () => this.backToLive() }, "Back to live");
+    this.liveButton = h(
+      "button",
+      {
+        type: "button",
+        class: "small",
+        hidden: true,
+        "data-live": "",
+        onclick: () => this.backToLive(),
+      },
+      "Back to live",
+    );
     this.note = h("span", { class: "viewing", hidden: true, "data-viewing": "" });
-    this.labelInput = h("input", { type: "text", id: "version-label", placeholder: "e.g. release candidate", "data-field": "label" });
-    this.labelForm = h("form", { class: "row", novalidate: true, "aria-label": "Label this version" },
+    this.labelInput = h("input", {
+      type: "text",
+      id: "version-label",
+      placeholder: "e.g. release candidate",
+      "data-field": "label",
+    });
+    this.labelForm = h(
+      "form",
+      { class: "row", novalidate: true, "aria-label": "Label this version" },
       h("label", { for: "version-label", style: { margin: 0 } }, "Label"),
       h("div", { class: "field", style: { margin: 0, flex: 1 } }, this.labelInput),
-      h("button", { type: "submit", class: "small", "data-save-label": "" }, icon(ICONS.tag), "Save label"),
-      h("button", { type: "button", class: "small", "data-base-map": "", onclick: () => this.saveBaseMap() }, "Save as base map"));
+      h(
+        "button",
+        { type: "submit", class: "small", "data-save-label": "" },
+        icon(ICONS.tag),
+        "Save label",
+      ),
+      h(
+        "button",
+        { type: "button", class: "small", "data-base-map": "", onclick: () => this.saveBaseMap() },
+        "Save as base map",
+      ),
+    );
     this.labelForm.addEventListener("submit", (e) => {
       e.preventDefault();
       this.saveLabel();
     });
     this.slider.addEventListener("input", () => this.scrubTo(Number(this.slider.value)));
-    this.el = h("div", {},
-      h("div", { class: "timeline" }, this.playButton, h("div", {}, this.slider, this.ticks), this.where),
-      h("div", { style: { marginTop: "12px" } }, this.labelForm));
+    this.el = h(
+      "div",
+      {},
+      h(
+        "div",
+        { class: "timeline" },
+        this.playButton,
+        h("div", {}, this.slider, this.ticks),
+        this.where,
+      ),
+      h("div", { style: { marginTop: "12px" } }, this.labelForm),
+    );
   }
 
   /** Fetch the version list; with nothing chosen, a finished run shows its final version. */
@@ -63,17 +133,27 @@ export class VersionTimeline {
     } catch {
       return;
     }
-    this.versions = Array.isArray(body) ? body : body.items ?? [];
+    this.versions = Array.isArray(body) ? body : (body.items ?? []);
     const live = this.isLive();
     const n = this.versions.length;
     this.slider.max = String(live ? n : Math.max(0, n - 1));
     this.slider.disabled = n === 0;
     this.playButton.disabled = n < 2;
     const span = Math.max(1, Number(this.slider.max));
-    this.ticks.replaceChildren(...this.versions.map((v, k) => h("span", {
-      class: v.label ? "labelled" : null, title: v.label ?? "", style: { left: `calc(${(100 * k) / span}% - 1px)` } })));
+    this.ticks.replaceChildren(
+      ...this.versions.map((v, k) =>
+        h("span", {
+          class: v.label ? "labelled" : null,
+          title: v.label ?? "",
+          style: { left: `calc(${(100 * k) / span}% - 1px)` },
+        }),
+      ),
+    );
     this.onList?.(this.versions);
-    const wanted = this.initialVersion === null ? -1 : this.versions.findIndex((v) => v.id === this.initialVersion);
+    const wanted =
+      this.initialVersion === null
+        ? -1
+        : this.versions.findIndex((v) => v.id === this.initialVersion);
     if (wanted >= 0 && !this.viewing) {
       // A refresh that overlaps this one must not put the final version over it.
       this.initialVersion = null;
@@ -94,11 +174,15 @@ export class VersionTimeline {
     const k = Number(this.slider.value);
     const v = this.versions[k];
     if (!v) {
-      this.where.textContent = this.isLive() ? `live · ${this.versions.length} version(s) so far` : "no versions";
+      this.where.textContent = this.isLive()
+        ? `live · ${this.versions.length} version(s) so far`
+        : "no versions";
       return;
     }
-    this.where.textContent = `version ${k + 1} of ${this.versions.length} · t = ${fmt(v.time_s, 4)} s · step ${fmtInt(v.step)}` +
-      (v.final ? " · final" : "") + (v.label ? ` · “${v.label}”` : "");
+    this.where.textContent =
+      `version ${k + 1} of ${this.versions.length} · t = ${fmt(v.time_s, 4)} s · step ${fmtInt(v.step)}` +
+      (v.final ? " · final" : "") +
+      (v.label ? ` · “${v.label}”` : "");
   }
 
   doc(v) {
@@ -190,7 +274,9 @@ export class VersionTimeline {
     const v = this.current();
     if (!v) return;
     try {
-      const updated = await api.patch(`/api/runs/${this.runId}/versions/${v.id}`, { label: this.labelInput.value.trim() || null });
+      const updated = await api.patch(`/api/runs/${this.runId}/versions/${v.id}`, {
+        label: this.labelInput.value.trim() || null,
+      });
       toast(updated.label ? `Version labelled “${updated.label}”.` : "Label removed.");
       if (this.viewing?.id === v.id) this.viewing = { ...this.viewing, label: updated.label };
       await this.refresh();
@@ -204,7 +290,11 @@ export class VersionTimeline {
     const v = this.current();
     if (!v) return;
     try {
-      const map = await api.post("/api/base-maps", { run_id: this.runId, version_id: v.id, name: `${this.baseMapName()} v${v.step}` });
+      const map = await api.post("/api/base-maps", {
+        run_id: this.runId,
+        version_id: v.id,
+        name: `${this.baseMapName()} v${v.step}`,
+      });
       toast(`Saved base map #${map.id} “${map.name}”.`);
     } catch (err) {
       showError(this.labelForm, err);

@@ -7,10 +7,30 @@
 import { api, clearErrors, estimators, scenarios, showError } from "../api.js";
 import { EVT, SELECT } from "../constants.js";
 import {
-  card, clear, confirmDialog, fmt, fmtBytes, fmtDate, fmtDuration, fmtInt, h, icon, ICONS, pageHead,
-  splitHeader, toast, withUnit,
+  card,
+  clear,
+  confirmDialog,
+  fmt,
+  fmtBytes,
+  fmtDate,
+  fmtDuration,
+  fmtInt,
+  h,
+  icon,
+  ICONS,
+  pageHead,
+  splitHeader,
+  toast,
+  withUnit,
 } from "../dom.js";
-import { encodeSignals, guessColumn, guessTable, KIND_TITLES, needsTable, rolesOf } from "../mapping.js";
+import {
+  encodeSignals,
+  guessColumn,
+  guessTable,
+  KIND_TITLES,
+  needsTable,
+  rolesOf,
+} from "../mapping.js";
 import { axis, baseLayout, purge, react, STATIC_CONFIG, theme } from "../plot.js";
 
 export const title = "Datasets";
@@ -20,19 +40,42 @@ const PREVIEW_POINTS = 400;
 const CONTROL = "select";
 
 export async function mount(root, ctx) {
-  const state = { datasets: [], selected: Number(ctx.query.get("id")) || null, plots: [], picked: new Set() };
-  const batchButton = h("button", { type: "button", class: "small", "data-run-batch": "", disabled: true,
-    onclick: () => {
-      const ids = [...state.picked].sort((a, b) => a - b);
-      ctx.navigate(`/runs/new?dataset=${ids[0]}&mode=batch&datasets=${ids.join(",")}`);
-    } }, icon(ICONS.grid), "Run batch…");
+  const state = {
+    datasets: [],
+    selected: Number(ctx.query.get("id")) || null,
+    plots: [],
+    picked: new Set(),
+  };
+  const batchButton = h(
+    "button",
+    {
+      type: "button",
+      class: "small",
+      "data-run-batch": "",
+      disabled: true,
+      onclick: () => {
+        const ids = [...state.picked].sort((a, b) => a - b);
+        ctx.navigate(`/runs/new?dataset=${ids[0]}&mode=batch&datasets=${ids.join(",")}`);
+      },
+    },
+    icon(ICONS.grid),
+    "Run batch…",
+  );
   const syncBatch = () => {
-    for (const id of state.picked) if (!state.datasets.some((d) => d.id === id)) state.picked.delete(id);
+    for (const id of state.picked)
+      if (!state.datasets.some((d) => d.id === id)) state.picked.delete(id);
     batchButton.disabled = state.picked.size < 2;
-    batchButton.replaceChildren(icon(ICONS.grid), state.picked.size >= 2 ? `Run batch on ${state.picked.size} datasets…` : "Run batch…");
+    batchButton.replaceChildren(
+      icon(ICONS.grid),
+      state.picked.size >= 2 ? `Run batch on ${state.picked.size} datasets…` : "Run batch…",
+    );
     batchButton.title = state.picked.size < 2 ? "Tick two or more datasets for a fleet batch" : "";
   };
-  const list = h("div", { "data-dataset-list": "" }, h("div", { class: "loading" }, "Loading datasets…"));
+  const list = h(
+    "div",
+    { "data-dataset-list": "" },
+    h("div", { class: "loading" }, "Loading datasets…"),
+  );
   const preview = h("div", { class: "stack", "data-dataset-preview": "" });
 
   root.append(
@@ -44,9 +87,18 @@ export async function mount(root, ctx) {
       "div",
       { class: "grid side-l" },
       h("div", { class: "stack" }, uploadCard(ctx, onCreated), simulateCard(ctx, onCreated)),
-      h("div", { class: "stack" },
-        card({ title: "Your datasets", hint: "tick several for a fleet batch", actions: [batchButton], bodyCls: "flush", body: list }),
-        preview),
+      h(
+        "div",
+        { class: "stack" },
+        card({
+          title: "Your datasets",
+          hint: "tick several for a fleet batch",
+          actions: [batchButton],
+          bodyCls: "flush",
+          body: list,
+        }),
+        preview,
+      ),
     ),
   );
 
@@ -64,43 +116,118 @@ export async function mount(root, ctx) {
   function renderList() {
     syncBatch();
     if (!state.datasets.length) {
-      list.replaceChildren(h("div", { class: "empty" }, "No datasets yet — upload a log or simulate a scenario."));
+      list.replaceChildren(
+        h("div", { class: "empty" }, "No datasets yet — upload a log or simulate a scenario."),
+      );
       return;
     }
     const rows = state.datasets.map((d) =>
-      h("tr", { "aria-current": d.id === state.selected ? "true" : null, dataset: { datasetId: d.id } },
-        h("td", {}, h("input", { type: "checkbox", id: `pick-ds-${d.id}`, "data-pick-dataset": d.id, checked: state.picked.has(d.id),
-          "aria-label": `Pick ${d.name} for a batch`, onchange: (e) => {
-            if (e.target.checked) state.picked.add(d.id);
-            else state.picked.delete(d.id);
-            syncBatch();
-          } })),
-        h("td", { class: "wrap" },
-          h("button", { class: "linklike", type: "button", "data-select-dataset": d.id,
-            "aria-label": `Preview dataset ${d.name}`, onclick: () => select(d.id) }, d.name),
-          " ", h("span", { class: "tag" }, d.source)),
+      h(
+        "tr",
+        { "aria-current": d.id === state.selected ? "true" : null, dataset: { datasetId: d.id } },
+        h(
+          "td",
+          {},
+          h("input", {
+            type: "checkbox",
+            id: `pick-ds-${d.id}`,
+            "data-pick-dataset": d.id,
+            checked: state.picked.has(d.id),
+            "aria-label": `Pick ${d.name} for a batch`,
+            onchange: (e) => {
+              if (e.target.checked) state.picked.add(d.id);
+              else state.picked.delete(d.id);
+              syncBatch();
+            },
+          }),
+        ),
+        h(
+          "td",
+          { class: "wrap" },
+          h(
+            "button",
+            {
+              class: "linklike",
+              type: "button",
+              "data-select-dataset": d.id,
+              "aria-label": `Preview dataset ${d.name}`,
+              onclick: () => select(d.id),
+            },
+            d.name,
+          ),
+          " ",
+          h("span", { class: "tag" }, d.source),
+        ),
         h("td", { class: "num" }, fmtInt(d.rows)),
         h("td", { class: "num" }, `${fmt(d.rate_hz, 3)} Hz`),
         h("td", { class: "num" }, fmtDuration(d.duration_s)),
         h("td", { class: "num" }, String(d.channels?.length ?? 0)),
         h("td", {}, fmtDate(d.created_at)),
-        h("td", { class: "num" },
-          h("div", { class: "row end" },
-            h("a", { class: "button small", href: `/runs/new?dataset=${d.id}`, "aria-label": `New run on ${d.name}` }, icon(ICONS.play), "New run"),
-            h("button", { class: "small danger icon", type: "button", "aria-label": `Delete dataset ${d.name}`,
-              title: "Delete", onclick: () => remove(d) }, icon(ICONS.trash)))),
+        h(
+          "td",
+          { class: "num" },
+          h(
+            "div",
+            { class: "row end" },
+            h(
+              "a",
+              {
+                class: "button small",
+                href: `/runs/new?dataset=${d.id}`,
+                "aria-label": `New run on ${d.name}`,
+              },
+              icon(ICONS.play),
+              "New run",
+            ),
+            h(
+              "button",
+              {
+                class: "small danger icon",
+                type: "button",
+                "aria-label": `Delete dataset ${d.name}`,
+                title: "Delete",
+                onclick: () => remove(d),
+              },
+              icon(ICONS.trash),
+            ),
+          ),
+        ),
       ),
     );
     list.replaceChildren(
-      h("div", { class: "table-wrap" },
-        h("table", { class: "data" },
-          h("thead", {}, h("tr", {},
-            h("th", { scope: "col" }, h("span", { class: "visually-hidden" }, "Pick for a batch")),
-            h("th", { scope: "col" }, "Name"), h("th", { scope: "col", class: "num" }, "Rows"),
-            h("th", { scope: "col", class: "num" }, "Rate"), h("th", { scope: "col", class: "num" }, "Duration"),
-            h("th", { scope: "col", class: "num" }, "Channels"), h("th", { scope: "col" }, "Created"),
-            h("th", { scope: "col", class: "num" }, h("span", { class: "visually-hidden" }, "Actions")))),
-          h("tbody", {}, rows))),
+      h(
+        "div",
+        { class: "table-wrap" },
+        h(
+          "table",
+          { class: "data" },
+          h(
+            "thead",
+            {},
+            h(
+              "tr",
+              {},
+              h(
+                "th",
+                { scope: "col" },
+                h("span", { class: "visually-hidden" }, "Pick for a batch"),
+              ),
+              h("th", { scope: "col" }, "Name"),
+              h("th", { scope: "col", class: "num" }, "Rows"),
+              h("th", { scope: "col", class: "num" }, "Rate"),
+              h("th", { scope: "col", class: "num" }, "Duration"),
+              h("th", { scope: "col", class: "num" }, "Channels"),
+              h("th", { scope: "col" }, "Created"),
+              h(
+                "th",
+                { scope: "col", class: "num" },
+                h("span", { class: "visually-hidden" }, "Actions"),
+              ),
+            ),
+          ),
+          h("tbody", {}, rows),
+        ),
+      ),
     );
   }
 
@@ -108,18 +235,25 @@ export async function mount(root, ctx) {
     state.selected = id;
     ctx.setQuery({ id });
     renderList();
-    const dataset = state.datasets.find((d) => d.id === id) ?? (await api.get(`/api/datasets/${id}`, { signal: ctx.signal }));
+    const dataset =
+      state.datasets.find((d) => d.id === id) ??
+      (await api.get(`/api/datasets/${id}`, { signal: ctx.signal }));
     await renderPreview(dataset);
   }
 
   async function renderPreview(dataset) {
     state.plots.forEach(purge);
     state.plots = [];
-    const channelsHost = h("div", { class: "channel-grid" }, h("div", { class: "loading" }, "Loading channels…"));
+    const channelsHost = h(
+      "div",
+      { class: "channel-grid" },
+      h("div", { class: "loading" }, "Loading channels…"),
+    );
     preview.replaceChildren(
       card({
         title: `Channels of “${dataset.name}”`,
-        hint: `${fmtInt(dataset.rows)} rows · ${fmt(dataset.rate_hz, 3)} Hz · ${fmtDuration(dataset.duration_s)}` +
+        hint:
+          `${fmtInt(dataset.rows)} rows · ${fmt(dataset.rate_hz, 3)} Hz · ${fmtDuration(dataset.duration_s)}` +
           (dataset.has_truth ? " · with truth" : ""),
         body: channelsHost,
       }),
@@ -127,24 +261,43 @@ export async function mount(root, ctx) {
     );
     let pv;
     try {
-      pv = await api.get(`/api/datasets/${dataset.id}/preview`, { query: { points: PREVIEW_POINTS }, signal: ctx.signal });
+      pv = await api.get(`/api/datasets/${dataset.id}/preview`, {
+        query: { points: PREVIEW_POINTS },
+        signal: ctx.signal,
+      });
     } catch (err) {
-      if (err.name !== "AbortError") channelsHost.replaceChildren(h("div", { class: "banner error" }, err.message));
+      if (err.name !== "AbortError")
+        channelsHost.replaceChildren(h("div", { class: "banner error" }, err.message));
       return;
     }
     clear(channelsHost);
     for (const [name, ch] of Object.entries(pv.channels ?? {})) {
       const values = ch.values ?? [];
       const finite = values.filter((v) => v !== null);
-      const plot = h("div", { class: "spark", role: "img", "aria-label": `Plot of ${withUnit(name, ch.unit)} over time` });
+      const plot = h("div", {
+        class: "spark",
+        role: "img",
+        "aria-label": `Plot of ${withUnit(name, ch.unit)} over time`,
+      });
       channelsHost.append(
-        h("div", { class: "channel", "data-channel": name },
-          h("div", { class: "ch-head" },
+        h(
+          "div",
+          { class: "channel", "data-channel": name },
+          h(
+            "div",
+            { class: "ch-head" },
             h("span", { class: "ch-name", title: name }, name),
-            h("span", { class: "ch-unit" }, ch.unit ? `[${ch.unit}]` : "no unit")),
-          h("div", { class: "ch-range" },
-            finite.length ? `${fmt(Math.min(...finite))} … ${fmt(Math.max(...finite))}` : "no finite values"),
-          plot),
+            h("span", { class: "ch-unit" }, ch.unit ? `[${ch.unit}]` : "no unit"),
+          ),
+          h(
+            "div",
+            { class: "ch-range" },
+            finite.length
+              ? `${fmt(Math.min(...finite))} … ${fmt(Math.max(...finite))}`
+              : "no finite values",
+          ),
+          plot,
+        ),
       );
       const draw = () => sparkline(plot, pv.time, values, ch.unit);
       draw();
@@ -154,15 +307,19 @@ export async function mount(root, ctx) {
   }
 
   async function remove(dataset) {
-    const ok = await confirmDialog(`Delete “${dataset.name}” (${fmtInt(dataset.rows)} rows)? This cannot be undone.`,
-      { title: "Delete dataset", confirmLabel: "Delete", danger: true });
+    const ok = await confirmDialog(
+      `Delete “${dataset.name}” (${fmtInt(dataset.rows)} rows)? This cannot be undone.`,
+      { title: "Delete dataset", confirmLabel: "Delete", danger: true },
+    );
     if (!ok) return;
     try {
       await api.del(`/api/datasets/${dataset.id}`);
     } catch (err) {
       if (err.code !== "conflict") return showError(root, err);
-      const force = await confirmDialog(`${err.message} Delete the dataset together with its runs and map versions?`,
-        { title: "Dataset in use", confirmLabel: "Delete everything", danger: true });
+      const force = await confirmDialog(
+        `${err.message} Delete the dataset together with its runs and map versions?`,
+        { title: "Dataset in use", confirmLabel: "Delete everything", danger: true },
+      );
       if (!force) return;
       try {
         await api.del(`/api/datasets/${dataset.id}`, { query: { force: "true" } });
@@ -180,7 +337,9 @@ export async function mount(root, ctx) {
   }
 
   async function onCreated(dataset) {
-    toast(`Dataset “${dataset.name}” ready: ${fmtInt(dataset.rows)} rows, ${dataset.channels?.length ?? 0} channels.`);
+    toast(
+      `Dataset “${dataset.name}” ready: ${fmtInt(dataset.rows)} rows, ${dataset.channels?.length ?? 0} channels.`,
+    );
     await refresh();
     await select(dataset.id);
   }
@@ -200,30 +359,62 @@ export async function mount(root, ctx) {
 /* ---------- upload ---------- */
 
 function uploadCard(ctx, onCreated) {
-  const fileInput = h("input", { type: "file", id: "upload-file", name: "file", class: "visually-hidden",
-    accept: ".csv,.txt,.mcap,.mf4,.mdf,.dat" });
-  const nameInput = h("input", { type: "text", id: "upload-name", name: "name", placeholder: "defaults to the file name" });
+  const fileInput = h("input", {
+    type: "file",
+    id: "upload-file",
+    name: "file",
+    class: "visually-hidden",
+    accept: ".csv,.txt,.mcap,.mf4,.mdf,.dat",
+  });
+  const nameInput = h("input", {
+    type: "text",
+    id: "upload-name",
+    name: "name",
+    placeholder: "defaults to the file name",
+  });
   const fileInfo = h("div", { class: "upload-file", hidden: true });
   const columns = h("div", { "data-upload-columns": "" });
   const bar = h("span");
-  const progress = h("div", { class: "progress", hidden: true, role: "progressbar", "aria-label": "Upload progress",
-    "aria-valuemin": "0", "aria-valuemax": "100", "aria-valuenow": "0" }, bar);
-  const submit = h("button", { type: "submit", class: "primary", disabled: true }, icon(ICONS.upload), "Upload");
-  const drop = h("label", { class: "dropzone", for: "upload-file" },
+  const progress = h(
+    "div",
+    {
+      class: "progress",
+      hidden: true,
+      role: "progressbar",
+      "aria-label": "Upload progress",
+      "aria-valuemin": "0",
+      "aria-valuemax": "100",
+      "aria-valuenow": "0",
+    },
+    bar,
+  );
+  const submit = h(
+    "button",
+    { type: "submit", class: "primary", disabled: true },
+    icon(ICONS.upload),
+    "Upload",
+  );
+  const drop = h(
+    "label",
+    { class: "dropzone", for: "upload-file" },
     icon(ICONS.upload),
     h("strong", {}, "Drop a log here or browse"),
     h("span", { class: "help" }, "CSV with a header row (“name [unit]”), MCAP or MDF4"),
-    fileInput);
+    fileInput,
+  );
   let file = null;
   let units = {};
 
-  const form = h("form", { novalidate: true, "aria-label": "Upload a log" },
+  const form = h(
+    "form",
+    { novalidate: true, "aria-label": "Upload a log" },
     h("div", { class: "field" }, drop, fileInfo),
     columns,
     h("div", { class: "field" }, h("label", { for: "upload-name" }, "Dataset name"), nameInput),
     h("div", { class: "banner error", "data-form-error": "", hidden: true }),
     progress,
-    h("div", { class: "row end", style: { marginTop: "12px" } }, submit));
+    h("div", { class: "row end", style: { marginTop: "12px" } }, submit),
+  );
 
   const choose = async (f) => {
     file = f;
@@ -233,7 +424,10 @@ function uploadCard(ctx, onCreated) {
     submit.disabled = !f;
     columns.replaceChildren();
     if (!f) return;
-    fileInfo.replaceChildren(h("span", { class: "name" }, f.name), h("span", { class: "ch-unit" }, fmtBytes(f.size)));
+    fileInfo.replaceChildren(
+      h("span", { class: "name" }, f.name),
+      h("span", { class: "ch-unit" }, fmtBytes(f.size)),
+    );
     if (!nameInput.value) nameInput.placeholder = f.name.replace(/\.[^.]+$/, "");
     if (/\.(csv|txt)$/i.test(f.name)) columns.append(await columnEditor(f, units));
   };
@@ -245,7 +439,8 @@ function uploadCard(ctx, onCreated) {
       drop.classList.add("over");
     });
   }
-  for (const type of ["dragleave", "drop"]) drop.addEventListener(type, () => drop.classList.remove("over"));
+  for (const type of ["dragleave", "drop"])
+    drop.addEventListener(type, () => drop.classList.remove("over"));
   drop.addEventListener("drop", (e) => {
     e.preventDefault();
     const f = e.dataTransfer?.files?.[0];
@@ -270,7 +465,10 @@ function uploadCard(ctx, onCreated) {
     };
     setProgress(0);
     try {
-      const dataset = await api.upload("/api/datasets", body, { onProgress: setProgress, signal: ctx.signal });
+      const dataset = await api.upload("/api/datasets", body, {
+        onProgress: setProgress,
+        signal: ctx.signal,
+      });
       setProgress(1);
       progress.classList.add("ok");
       file = null;
@@ -293,7 +491,13 @@ function uploadCard(ctx, onCreated) {
 /** A problem with one CSV column is shown on that column's row; others next to the file or form. */
 function showUploadError(form, err) {
   const row = err?.field ? form.querySelector(SELECT.dataColumn(err.field)) : null;
-  if (row) return showError(form, { ...err, message: err.message, name: err.name, field: `column:${err.field}` });
+  if (row)
+    return showError(form, {
+      ...err,
+      message: err.message,
+      name: err.name,
+      field: `column:${err.field}`,
+    });
   return showError(form, err);
 }
 
@@ -301,54 +505,122 @@ function showUploadError(form, err) {
 async function columnEditor(file, units) {
   const head = await file.slice(0, 64 * 1024).text();
   const firstLine = head.split(/\r?\n/, 1)[0] ?? "";
-  const sep = [",", ";", "\t"].map((s) => [s, firstLine.split(s).length]).sort((a, b) => b[1] - a[1])[0][0];
+  const sep = [",", ";", "\t"]
+    .map((s) => [s, firstLine.split(s).length])
+    .sort((a, b) => b[1] - a[1])[0][0];
   const cols = firstLine.split(sep).map((c) => splitHeader(c.replace(/^"|"$/g, "")));
-  if (cols.length < 2) return h("div", { class: "banner warn" }, "Could not read a header row; the server will check the file.");
+  if (cols.length < 2)
+    return h(
+      "div",
+      { class: "banner warn" },
+      "Could not read a header row; the server will check the file.",
+    );
   const rows = cols.map((c, k) => {
     const id = `unit-${k}`;
-    const input = h("input", { type: "text", id, value: c.unit, placeholder: "unit", "aria-label": `Unit of ${c.name}`,
-      name: `units.${c.name}`, "data-column": c.name, "data-field": `column:${c.name}`,
+    const input = h("input", {
+      type: "text",
+      id,
+      value: c.unit,
+      placeholder: "unit",
+      "aria-label": `Unit of ${c.name}`,
+      name: `units.${c.name}`,
+      "data-column": c.name,
+      "data-field": `column:${c.name}`,
       oninput: (e) => {
         units[c.name] = e.target.value.trim() === c.unit ? null : e.target.value.trim();
-      } });
+      },
+    });
     return h("tr", {}, h("td", { class: "mono" }, c.name), h("td", {}, input));
   });
-  return h("div", { class: "field" },
+  return h(
+    "div",
+    { class: "field" },
     h("div", { class: "label" }, `Columns (${cols.length}) and units`),
-    h("div", { class: "values-grid columns-table", style: { maxHeight: "220px" } },
-      h("table", { class: "data" },
-        h("thead", {}, h("tr", {}, h("th", { scope: "col" }, "Column"), h("th", { scope: "col" }, "Unit"))),
-        h("tbody", {}, rows))),
-    h("div", { class: "help" }, "Units come from “name [unit]” headers; fill in any that are missing."));
+    h(
+      "div",
+      { class: "values-grid columns-table", style: { maxHeight: "220px" } },
+      h(
+        "table",
+        { class: "data" },
+        h(
+          "thead",
+          {},
+          h("tr", {}, h("th", { scope: "col" }, "Column"), h("th", { scope: "col" }, "Unit")),
+        ),
+        h("tbody", {}, rows),
+      ),
+    ),
+    h(
+      "div",
+      { class: "help" },
+      "Units come from “name [unit]” headers; fill in any that are missing.",
+    ),
+  );
 }
 
 /* ---------- simulate ---------- */
 
 function simulateCard(ctx, onCreated) {
-  const select = h("select", { id: "sim-scenario", name: "scenario" }, h("option", { value: "" }, "Loading scenarios…"));
-  const seed = h("input", { type: "number", id: "sim-seed", name: "seed", value: "0", step: "1", min: "0" });
-  const name = h("input", { type: "text", id: "sim-name", name: "name", placeholder: "defaults to the scenario name" });
+  const select = h(
+    "select",
+    { id: "sim-scenario", name: "scenario" },
+    h("option", { value: "" }, "Loading scenarios…"),
+  );
+  const seed = h("input", {
+    type: "number",
+    id: "sim-seed",
+    name: "seed",
+    value: "0",
+    step: "1",
+    min: "0",
+  });
+  const name = h("input", {
+    type: "text",
+    id: "sim-name",
+    name: "name",
+    placeholder: "defaults to the scenario name",
+  });
   const about = h("div", { class: "help", "data-scenario-about": "" });
   const submit = h("button", { type: "submit", class: "primary" }, icon(ICONS.flask), "Simulate");
   let list = [];
-  const form = h("form", { novalidate: true, "aria-label": "Simulate a scenario" },
+  const form = h(
+    "form",
+    { novalidate: true, "aria-label": "Simulate a scenario" },
     h("div", { class: "field" }, h("label", { for: "sim-scenario" }, "Scenario"), select, about),
-    h("div", { class: "fields two" },
+    h(
+      "div",
+      { class: "fields two" },
       h("div", { class: "field" }, h("label", { for: "sim-seed" }, "Seed"), seed),
-      h("div", { class: "field" }, h("label", { for: "sim-name" }, "Name"), name)),
+      h("div", { class: "field" }, h("label", { for: "sim-name" }, "Name"), name),
+    ),
     h("div", { class: "banner error", "data-form-error": "", hidden: true }),
-    h("div", { class: "row end" }, submit));
+    h("div", { class: "row end" }, submit),
+  );
 
   const describe = () => {
     const s = list.find((x) => x.name === select.value);
-    about.replaceChildren(s ? `${s.description} (${fmt(s.rate_hz, 3)} Hz, ${fmtDuration(s.duration_s)}; for ${s.estimators.join(", ")})` : "");
+    about.replaceChildren(
+      s
+        ? `${s.description} (${fmt(s.rate_hz, 3)} Hz, ${fmtDuration(s.duration_s)}; for ${s.estimators.join(", ")})`
+        : "",
+    );
   };
   select.addEventListener("change", describe);
-  scenarios().then((items) => {
-    list = items;
-    select.replaceChildren(...items.map((s) => h("option", { value: s.name }, s.title && s.title !== s.name ? `${s.name} — ${s.title}` : s.name)));
-    describe();
-  }).catch((err) => showError(form, err));
+  scenarios()
+    .then((items) => {
+      list = items;
+      select.replaceChildren(
+        ...items.map((s) =>
+          h(
+            "option",
+            { value: s.name },
+            s.title && s.title !== s.name ? `${s.name} — ${s.title}` : s.name,
+          ),
+        ),
+      );
+      describe();
+    })
+    .catch((err) => showError(form, err));
 
   form.addEventListener("submit", async (e) => {
     e.preventDefault();
@@ -374,14 +646,26 @@ function simulateCard(ctx, onCreated) {
 
 function sparkline(el, time, values, unit) {
   const t = theme();
-  react(el, [{ x: time, y: values, type: "scatter", mode: "lines", line: { color: t.accent, width: 1.2 },
-    hovertemplate: `%{x:.2f} s: %{y:.4g} ${unit ?? ""}<extra></extra>` }],
-  baseLayout({
-    margin: { l: 4, r: 4, t: 2, b: 2 },
-    xaxis: axis("", { visible: false }),
-    yaxis: axis("", { visible: false }),
-    showlegend: false,
-  }), STATIC_CONFIG);
+  react(
+    el,
+    [
+      {
+        x: time,
+        y: values,
+        type: "scatter",
+        mode: "lines",
+        line: { color: t.accent, width: 1.2 },
+        hovertemplate: `%{x:.2f} s: %{y:.4g} ${unit ?? ""}<extra></extra>`,
+      },
+    ],
+    baseLayout({
+      margin: { l: 4, r: 4, t: 2, b: 2 },
+      xaxis: axis("", { visible: false }),
+      yaxis: axis("", { visible: false }),
+      showlegend: false,
+    }),
+    STATIC_CONFIG,
+  );
 }
 
 /* ---------- column mapping ---------- */
@@ -398,21 +682,50 @@ async function mappingCard(ctx, dataset) {
   }
   let suggested = [];
   if (dataset.scenario) {
-    suggested = (await scenarios().catch(() => [])).find((s) => s.name === dataset.scenario)?.estimators ?? [];
+    suggested =
+      (await scenarios().catch(() => [])).find((s) => s.name === dataset.scenario)?.estimators ??
+      [];
   }
-  const estSelect = h("select", { id: "map-estimator", name: "estimator" },
+  const estSelect = h(
+    "select",
+    { id: "map-estimator", name: "estimator" },
     Object.entries(KIND_TITLES).map(([kind, label]) =>
-      h("optgroup", { label }, catalog.filter((e) => e.kind === kind).map((e) =>
-        h("option", { value: e.name }, `${e.name} — ${e.title}${suggested.includes(e.name) ? " (suggested)" : ""}`)))),
-    catalog.filter((e) => !KIND_TITLES[e.kind]).map((e) => h("option", { value: e.name }, `${e.name} — ${e.title}`)));
-  estSelect.value = suggested[0] ?? (catalog.find((e) => e.name === "skf") ? "skf" : catalog[0]?.name ?? "");
+      h(
+        "optgroup",
+        { label },
+        catalog
+          .filter((e) => e.kind === kind)
+          .map((e) =>
+            h(
+              "option",
+              { value: e.name },
+              `${e.name} — ${e.title}${suggested.includes(e.name) ? " (suggested)" : ""}`,
+            ),
+          ),
+      ),
+    ),
+    catalog
+      .filter((e) => !KIND_TITLES[e.kind])
+      .map((e) => h("option", { value: e.name }, `${e.name} — ${e.title}`)),
+  );
+  estSelect.value =
+    suggested[0] ?? (catalog.find((e) => e.name === "skf") ? "skf" : (catalog[0]?.name ?? ""));
   const roles = h("div", { class: "fields" });
-  const go = h("a", { class: "button primary", href: "#", "data-continue": "" }, "Continue to new run →");
+  const go = h(
+    "a",
+    { class: "button primary", href: "#", "data-continue": "" },
+    "Continue to new run →",
+  );
 
   const channelSelect = (id, name, chosen, { optional = false } = {}) =>
-    h("select", { id, name },
+    h(
+      "select",
+      { id, name },
       optional ? h("option", { value: "" }, "— none —") : null,
-      channels.map((c) => h("option", { value: c.name, selected: c.name === chosen }, withUnit(c.name, c.unit))));
+      channels.map((c) =>
+        h("option", { value: c.name, selected: c.name === chosen }, withUnit(c.name, c.unit)),
+      ),
+    );
 
   const render = () => {
     const est = catalog.find((e) => e.name === estSelect.value);
@@ -421,12 +734,30 @@ async function mappingCard(ctx, dataset) {
     if (est.kind === "table-filter") {
       const guess = guessTable(channels);
       roles.append(
-        h("div", { class: "field" }, h("label", { for: "map-y" }, "Measured output (y)"), channelSelect("map-y", "signals.y", guess.y)),
-        h("div", { class: "field" }, h("label", { for: "map-ax0" }, "Table axis 1 (x)"), channelSelect("map-ax0", "axis.0", guess.axes[0])),
-        h("div", { class: "field" }, h("label", { for: "map-ax1" }, "Table axis 2 (y)"),
-          channelSelect("map-ax1", "axis.1", guess.axes[1], { optional: true })),
-        h("div", { class: "field" }, h("label", { for: "map-ax2" }, "Table axis 3 (slices)"),
-          channelSelect("map-ax2", "axis.2", null, { optional: true })),
+        h(
+          "div",
+          { class: "field" },
+          h("label", { for: "map-y" }, "Measured output (y)"),
+          channelSelect("map-y", "signals.y", guess.y),
+        ),
+        h(
+          "div",
+          { class: "field" },
+          h("label", { for: "map-ax0" }, "Table axis 1 (x)"),
+          channelSelect("map-ax0", "axis.0", guess.axes[0]),
+        ),
+        h(
+          "div",
+          { class: "field" },
+          h("label", { for: "map-ax1" }, "Table axis 2 (y)"),
+          channelSelect("map-ax1", "axis.1", guess.axes[1], { optional: true }),
+        ),
+        h(
+          "div",
+          { class: "field" },
+          h("label", { for: "map-ax2" }, "Table axis 3 (slices)"),
+          channelSelect("map-ax2", "axis.2", null, { optional: true }),
+        ),
       );
     } else {
       const taken = new Set();
@@ -434,12 +765,24 @@ async function mappingCard(ctx, dataset) {
         const chosen = guessColumn(role, channels, taken);
         if (chosen) taken.add(chosen);
         const id = `map-role-${role.role}`;
-        roles.append(h("div", { class: "field" },
-          h("label", { for: id }, `${role.role}${role.unit ? ` [${role.unit}]` : ""}`),
-          channelSelect(id, `signals.${role.role}`, chosen),
-          role.description ? h("div", { class: "help" }, role.description) : null));
+        roles.append(
+          h(
+            "div",
+            { class: "field" },
+            h("label", { for: id }, `${role.role}${role.unit ? ` [${role.unit}]` : ""}`),
+            channelSelect(id, `signals.${role.role}`, chosen),
+            role.description ? h("div", { class: "help" }, role.description) : null,
+          ),
+        );
       }
-      if (!rolesOf(est).length) roles.append(h("p", { class: "help" }, "This estimator reads its channels by name (set them on the next page)."));
+      if (!rolesOf(est).length)
+        roles.append(
+          h(
+            "p",
+            { class: "help" },
+            "This estimator reads its channels by name (set them on the next page).",
+          ),
+        );
     }
     update();
   };
@@ -453,7 +796,8 @@ async function mappingCard(ctx, dataset) {
     }
     const q = new URLSearchParams({ dataset: String(dataset.id), estimator: estSelect.value });
     if (Object.keys(signals).length) q.set("signals", encodeSignals(signals));
-    if (axes.length && needsTable(catalog.find((e) => e.name === estSelect.value))) q.set("axes", axes.join(","));
+    if (axes.length && needsTable(catalog.find((e) => e.name === estSelect.value)))
+      q.set("axes", axes.join(","));
     go.href = `/runs/new?${q.toString().replaceAll("%2C", ",").replaceAll("%3A", ":")}`;
   };
 
@@ -464,5 +808,10 @@ async function mappingCard(ctx, dataset) {
     roles,
   );
   render();
-  return card({ title: "Map columns to an estimator", hint: "then set up the run", body: host, foot: [go] });
+  return card({
+    title: "Map columns to an estimator",
+    hint: "then set up the run",
+    body: host,
+    foot: [go],
+  });
 }

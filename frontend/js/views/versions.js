@@ -6,7 +6,8 @@
 import { api, clearErrors, showError } from "../api.js";
 import { EVT, EXPORT_FORMATS } from "../constants.js";
 import { card, fmt, fmtInt, h, icon, ICONS, pageHead, toast } from "../dom.js";
-import { diffNested, MapPlot, sameGrid, SliceGroup } from "../map-plot.js";
+import { diffNested, sameGrid } from "../grid-math.js";
+import { MapPlot, SliceGroup } from "../map-plot.js";
 
 export const title = "Versions";
 
@@ -16,19 +17,40 @@ export async function mount(root, ctx) {
     api.all("/api/datasets", { signal: ctx.signal }).catch(() => []),
   ]);
   const runs = allRuns.filter((r) => r.produces_map !== false);
-  root.append(pageHead({ title: "Versions", sub: "Compare two map versions, label the one you trust, and export it." }));
+  root.append(
+    pageHead({
+      title: "Versions",
+      sub: "Compare two map versions, label the one you trust, and export it.",
+    }),
+  );
   if (!runs.length) {
-    root.append(card({ title: "No maps yet", body: h("p", {}, "Versions appear as map runs progress. ", h("a", { href: "/runs/new" }, "Start a run →")) }));
+    root.append(
+      card({
+        title: "No maps yet",
+        body: h(
+          "p",
+          {},
+          "Versions appear as map runs progress. ",
+          h("a", { href: "/runs/new" }, "Start a run →"),
+        ),
+      }),
+    );
     return undefined;
   }
 
   const parse = (text) => {
-    const [r, v] = String(text ?? "").split(":").map(Number);
-    return { run: Number.isInteger(r) && r > 0 ? r : null, version: Number.isInteger(v) && v > 0 ? v : null };
+    const [r, v] = String(text ?? "")
+      .split(":")
+      .map(Number);
+    return {
+      run: Number.isInteger(r) && r > 0 ? r : null,
+      version: Number.isInteger(v) && v > 0 ? v : null,
+    };
   };
   const a = parse(ctx.query.get("a"));
   const b = parse(ctx.query.get("b"));
-  if (!a.run) a.run = runs.find((r) => r.n_versions > 0 || r.status === "succeeded")?.id ?? runs[0].id;
+  if (!a.run)
+    a.run = runs.find((r) => r.n_versions > 0 || r.status === "succeeded")?.id ?? runs[0].id;
   if (!b.run) b.run = a.run;
 
   const sides = { a: { ...a, versions: [], doc: null }, b: { ...b, versions: [], doc: null } };
@@ -38,42 +60,103 @@ export async function mount(root, ctx) {
   const unitOf = (runId) => {
     const r = runs.find((x) => x.id === runId);
     const ds = datasets.find((d) => d.id === r?.dataset_id);
-    return { unit: ds?.channels?.find((c) => c.name === r?.signals?.y)?.unit ?? r?.config?.output_unit ?? "", label: r?.signals?.y ?? "value" };
+    return {
+      unit:
+        ds?.channels?.find((c) => c.name === r?.signals?.y)?.unit ?? r?.config?.output_unit ?? "",
+      label: r?.signals?.y ?? "value",
+    };
   };
 
   const stats = h("div", { "data-diff-stats": "" });
   const sideCards = {};
   for (const key of ["a", "b"]) sideCards[key] = sideCard(key);
-  const diffEl = h("div", { class: "plot map", "data-plot": "diff", role: "img", "aria-label": "Difference B minus A" });
+  const diffEl = h("div", {
+    class: "plot map",
+    "data-plot": "diff",
+    role: "img",
+    "aria-label": "Difference B minus A",
+  });
   plots.diff = new MapPlot(diffEl, { kind: "diff", slices });
   root.append(
-    h("div", { class: "stack" },
+    h(
+      "div",
+      { class: "stack" },
       h("div", { class: "grid cols-2" }, sideCards.a.el, sideCards.b.el),
-      card({ title: "Difference B − A", hint: "red: B is higher", cls: "version-diff",
-        body: h("div", { class: "grid side" }, diffEl, stats) })),
+      card({
+        title: "Difference B − A",
+        hint: "red: B is higher",
+        cls: "version-diff",
+        body: h("div", { class: "grid side" }, diffEl, stats),
+      }),
+    ),
   );
 
   function sideCard(key) {
     const side = sides[key];
-    const runSelect = h("select", { id: `run-${key}`, name: `run_${key}`, "aria-label": `Run ${key.toUpperCase()}` },
-      runs.map((r) => h("option", { value: String(r.id), selected: r.id === side.run }, `#${r.id} ${r.estimator}${r.name ? ` · ${r.name}` : ""}`)));
-    const versionSelect = h("select", { id: `version-${key}`, name: `version_${key}`, "aria-label": `Version ${key.toUpperCase()}`, "data-field": "version" });
-    const plotEl = h("div", { class: "plot small", "data-plot": `version-${key}`, role: "img", "aria-label": `Map version ${key.toUpperCase()}` });
+    const runSelect = h(
+      "select",
+      { id: `run-${key}`, name: `run_${key}`, "aria-label": `Run ${key.toUpperCase()}` },
+      runs.map((r) =>
+        h(
+          "option",
+          { value: String(r.id), selected: r.id === side.run },
+          `#${r.id} ${r.estimator}${r.name ? ` · ${r.name}` : ""}`,
+        ),
+      ),
+    );
+    const versionSelect = h("select", {
+      id: `version-${key}`,
+      name: `version_${key}`,
+      "aria-label": `Version ${key.toUpperCase()}`,
+      "data-field": "version",
+    });
+    const plotEl = h("div", {
+      class: "plot small",
+      "data-plot": `version-${key}`,
+      role: "img",
+      "aria-label": `Map version ${key.toUpperCase()}`,
+    });
     const info = h("div", { class: "help", "data-version-info": key });
-    const labelInput = h("input", { type: "text", id: `label-${key}`, name: "label", placeholder: "e.g. release candidate" });
-    const format = h("select", { id: `format-${key}`, "aria-label": `Export format for ${key.toUpperCase()}` },
-      EXPORT_FORMATS.map((f) => h("option", { value: f.value }, f.label)));
-    const form = h("form", { novalidate: true, "aria-label": `Label version ${key.toUpperCase()}` },
-      h("div", { class: "field" }, h("label", { for: `label-${key}` }, "Label"),
-        h("div", { class: "row", style: { flexWrap: "nowrap" } }, labelInput,
-          h("button", { type: "submit", class: "small", "data-save-label": key }, icon(ICONS.tag), "Save"))),
-      h("div", { class: "banner error", "data-form-error": "", hidden: true }));
+    const labelInput = h("input", {
+      type: "text",
+      id: `label-${key}`,
+      name: "label",
+      placeholder: "e.g. release candidate",
+    });
+    const format = h(
+      "select",
+      { id: `format-${key}`, "aria-label": `Export format for ${key.toUpperCase()}` },
+      EXPORT_FORMATS.map((f) => h("option", { value: f.value }, f.label)),
+    );
+    const form = h(
+      "form",
+      { novalidate: true, "aria-label": `Label version ${key.toUpperCase()}` },
+      h(
+        "div",
+        { class: "field" },
+        h("label", { for: `label-${key}` }, "Label"),
+        h(
+          "div",
+          { class: "row", style: { flexWrap: "nowrap" } },
+          labelInput,
+          h(
+            "button",
+            { type: "submit", class: "small", "data-save-label": key },
+            icon(ICONS.tag),
+            "Save",
+          ),
+        ),
+      ),
+      h("div", { class: "banner error", "data-form-error": "", hidden: true }),
+    );
     form.addEventListener("submit", async (e) => {
       e.preventDefault();
       clearErrors(form);
       if (!side.doc) return;
       try {
-        const updated = await api.patch(`/api/runs/${side.run}/versions/${side.version}`, { label: labelInput.value.trim() || null });
+        const updated = await api.patch(`/api/runs/${side.run}/versions/${side.version}`, {
+          label: labelInput.value.trim() || null,
+        });
         const v = side.versions.find((x) => x.id === side.version);
         if (v) v.label = updated.label;
         fillVersions(key);
@@ -82,10 +165,19 @@ export async function mount(root, ctx) {
         showError(form, err);
       }
     });
-    const exportBtn = h("button", { type: "button", "data-export": key }, icon(ICONS.download), "Export");
+    const exportBtn = h(
+      "button",
+      { type: "button", "data-export": key },
+      icon(ICONS.download),
+      "Export",
+    );
     exportBtn.addEventListener("click", async () => {
       try {
-        await api.download(`/api/runs/${side.run}/export`, { format: format.value, version: side.version }, `run-${side.run}-v${side.version}.${format.value}`);
+        await api.download(
+          `/api/runs/${side.run}/export`,
+          { format: format.value, version: side.version },
+          `run-${side.run}-v${side.version}.${format.value}`,
+        );
       } catch (err) {
         showError(form, err);
       }
@@ -93,7 +185,11 @@ export async function mount(root, ctx) {
     const baseBtn = h("button", { type: "button", "data-base-map": key }, "Save as base map");
     baseBtn.addEventListener("click", async () => {
       try {
-        const map = await api.post("/api/base-maps", { run_id: side.run, version_id: side.version, name: `run ${side.run} version ${side.version}${labelInput.value ? ` (${labelInput.value})` : ""}` });
+        const map = await api.post("/api/base-maps", {
+          run_id: side.run,
+          version_id: side.version,
+          name: `run ${side.run} version ${side.version}${labelInput.value ? ` (${labelInput.value})` : ""}`,
+        });
         toast(`Saved base map #${map.id}.`);
       } catch (err) {
         showError(form, err);
@@ -113,11 +209,24 @@ export async function mount(root, ctx) {
     const el = card({
       title: key === "a" ? "Version A" : "Version B",
       cls: `version-side ${key}`,
-      body: h("div", {},
-        h("div", { class: "picker" },
+      body: h(
+        "div",
+        {},
+        h(
+          "div",
+          { class: "picker" },
           h("div", { class: "field" }, h("label", { for: `run-${key}` }, "Run"), runSelect),
-          h("div", { class: "field" }, h("label", { for: `version-${key}` }, "Version"), versionSelect)),
-        plotEl, info, form),
+          h(
+            "div",
+            { class: "field" },
+            h("label", { for: `version-${key}` }, "Version"),
+            versionSelect,
+          ),
+        ),
+        plotEl,
+        info,
+        form,
+      ),
       foot: [h("div", { style: { width: "190px" } }, format), exportBtn, baseBtn],
     });
     return { el, versionSelect, labelInput, info, runSelect };
@@ -126,17 +235,27 @@ export async function mount(root, ctx) {
   function fillVersions(key) {
     const side = sides[key];
     const { versionSelect } = sideCards[key];
-    versionSelect.replaceChildren(...side.versions.map((v, k) =>
-      h("option", { value: String(v.id), selected: v.id === side.version },
-        `${k + 1}. t = ${fmt(v.time_s, 4)} s · step ${fmtInt(v.step)}${v.final ? " · final" : ""}${v.label ? ` · “${v.label}”` : ""}`)));
+    versionSelect.replaceChildren(
+      ...side.versions.map((v, k) =>
+        h(
+          "option",
+          { value: String(v.id), selected: v.id === side.version },
+          `${k + 1}. t = ${fmt(v.time_s, 4)} s · step ${fmtInt(v.step)}${v.final ? " · final" : ""}${v.label ? ` · “${v.label}”` : ""}`,
+        ),
+      ),
+    );
   }
 
   async function loadRun(key) {
     const side = sides[key];
     const body = await api.get(`/api/runs/${side.run}/versions`, { signal: ctx.signal });
-    side.versions = Array.isArray(body) ? body : body.items ?? [];
+    side.versions = Array.isArray(body) ? body : (body.items ?? []);
     if (!side.versions.some((v) => v.id === side.version)) {
-      side.version = side.versions.length ? (key === "a" ? side.versions[0].id : side.versions.at(-1).id) : null;
+      side.version = side.versions.length
+        ? key === "a"
+          ? side.versions[0].id
+          : side.versions.at(-1).id
+        : null;
     }
     const { unit, label } = unitOf(side.run);
     plots[key].unit = unit;
@@ -158,17 +277,24 @@ export async function mount(root, ctx) {
       drawDiff();
       return;
     }
-    side.doc = await api.get(`/api/runs/${side.run}/versions/${side.version}`, { signal: ctx.signal });
+    side.doc = await api.get(`/api/runs/${side.run}/versions/${side.version}`, {
+      signal: ctx.signal,
+    });
     card.labelInput.value = side.doc.label ?? "";
-    card.info.textContent = `run #${side.run} · step ${fmtInt(side.doc.step)} · t = ${fmt(side.doc.time_s, 4)} s` +
-      (side.doc.axes ? ` · ${side.doc.axes.map((x) => `${x.name} (${x.breakpoints.length})`).join(" × ")}` : "");
+    card.info.textContent =
+      `run #${side.run} · step ${fmtInt(side.doc.step)} · t = ${fmt(side.doc.time_s, 4)} s` +
+      (side.doc.axes
+        ? ` · ${side.doc.axes.map((x) => `${x.name} (${x.breakpoints.length})`).join(" × ")}`
+        : "");
     syncUrl();
     drawAll();
   }
 
   function drawAll() {
     const docs = ["a", "b"].map((k) => sides[k].doc).filter(Boolean);
-    const flat = docs.flatMap((d) => d.values.flat(Infinity)).filter((v) => v !== null && Number.isFinite(v));
+    const flat = docs
+      .flatMap((d) => d.values.flat(Infinity))
+      .filter((v) => v !== null && Number.isFinite(v));
     const range = flat.length ? [Math.min(...flat), Math.max(...flat)] : null;
     for (const k of ["a", "b"]) {
       if (!sides[k].doc) continue;
@@ -187,7 +313,13 @@ export async function mount(root, ctx) {
     }
     if (!sameGrid(A.axes, B.axes)) {
       plots.diff.clear();
-      stats.replaceChildren(h("span", { class: "banner warn" }, "The two versions have different grids; no cell-by-cell difference."));
+      stats.replaceChildren(
+        h(
+          "span",
+          { class: "banner warn" },
+          "The two versions have different grids; no cell-by-cell difference.",
+        ),
+      );
       return;
     }
     const d = diffNested(A.values, B.values);
@@ -198,14 +330,30 @@ export async function mount(root, ctx) {
     const changed = flat.filter((v) => Math.abs(v) > 1e-9 * Math.max(1, maxAbs)).length;
     const unit = plots.diff.unit ? ` ${plots.diff.unit}` : "";
     const mean = flat.length ? flat.reduce((s, v) => s + v, 0) / flat.length : 0;
-    const stat = (label, key, value) => [h("dt", {}, label), h("dd", {}, h("b", { "data-stat": key }, value))];
-    stats.replaceChildren(h("dl", { class: "kv" },
-      stat("A", "a", `run #${sides.a.run}, step ${fmtInt(A.step)}${A.label ? ` “${A.label}”` : ""}`),
-      stat("B", "b", `run #${sides.b.run}, step ${fmtInt(B.step)}${B.label ? ` “${B.label}”` : ""}`),
-      stat("max |Δ|", "max", `${fmt(maxAbs)}${unit}`),
-      stat("RMS Δ", "rms", `${fmt(rms)}${unit}`),
-      stat("mean Δ", "mean", `${fmt(mean)}${unit}`),
-      stat("cells changed", "changed", `${changed} / ${flat.length}`)));
+    const stat = (label, key, value) => [
+      h("dt", {}, label),
+      h("dd", {}, h("b", { "data-stat": key }, value)),
+    ];
+    stats.replaceChildren(
+      h(
+        "dl",
+        { class: "kv" },
+        stat(
+          "A",
+          "a",
+          `run #${sides.a.run}, step ${fmtInt(A.step)}${A.label ? ` “${A.label}”` : ""}`,
+        ),
+        stat(
+          "B",
+          "b",
+          `run #${sides.b.run}, step ${fmtInt(B.step)}${B.label ? ` “${B.label}”` : ""}`,
+        ),
+        stat("max |Δ|", "max", `${fmt(maxAbs)}${unit}`),
+        stat("RMS Δ", "rms", `${fmt(rms)}${unit}`),
+        stat("mean Δ", "mean", `${fmt(mean)}${unit}`),
+        stat("cells changed", "changed", `${changed} / ${flat.length}`),
+      ),
+    );
   }
 
   function syncUrl() {

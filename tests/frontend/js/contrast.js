@@ -9,12 +9,18 @@
     if (!c || c === "transparent") return [0, 0, 0, 0];
     let m = /^rgba?\(([^)]+)\)$/.exec(c);
     if (m) {
-      const p = m[1].split(/[\s,/]+/).filter(Boolean).map(Number);
+      const p = m[1]
+        .split(/[\s,/]+/)
+        .filter(Boolean)
+        .map(Number);
       return [p[0], p[1], p[2], p.length > 3 ? p[3] : 1];
     }
     m = /^color\(srgb ([^)]+)\)$/.exec(c);
     if (m) {
-      const p = m[1].split(/[\s/]+/).filter(Boolean).map(Number);
+      const p = m[1]
+        .split(/[\s/]+/)
+        .filter(Boolean)
+        .map(Number);
       return [p[0] * 255, p[1] * 255, p[2] * 255, p.length > 3 ? p[3] : 1];
     }
     return null;
@@ -22,13 +28,21 @@
   const over = (top, bottom) => {
     const a = top[3] + bottom[3] * (1 - top[3]);
     if (a === 0) return [0, 0, 0, 0];
-    return [0, 1, 2].map((i) => (top[i] * top[3] + bottom[i] * bottom[3] * (1 - top[3])) / a).concat([a]);
+    return [0, 1, 2]
+      .map((i) => (top[i] * top[3] + bottom[i] * bottom[3] * (1 - top[3])) / a)
+      .concat([a]);
   };
   const lum = ([r, g, b]) => {
-    const f = (v) => { v /= 255; return v <= 0.04045 ? v / 12.92 : ((v + 0.055) / 1.055) ** 2.4; };
+    const f = (v) => {
+      v /= 255;
+      return v <= 0.04045 ? v / 12.92 : ((v + 0.055) / 1.055) ** 2.4;
+    };
     return 0.2126 * f(r) + 0.7152 * f(g) + 0.0722 * f(b);
   };
-  const ratio = (a, b) => { const [x, y] = [lum(a), lum(b)].sort((p, q) => q - p); return (x + 0.05) / (y + 0.05); };
+  const ratio = (a, b) => {
+    const [x, y] = [lum(a), lum(b)].sort((p, q) => q - p);
+    return (x + 0.05) / (y + 0.05);
+  };
   /** The colour behind el: its own and its ancestors' backgrounds, composited on the canvas. */
   const backdrop = (el, own = null) => {
     const layers = own ? [own] : [];
@@ -50,7 +64,8 @@
     return false;
   };
   const shown = (el) => {
-    if (!el.isConnected || el.closest("[hidden], .hoverlayer, .visually-hidden, noscript")) return false;
+    if (!el.isConnected || el.closest("[hidden], .hoverlayer, .visually-hidden, noscript"))
+      return false;
     const r = el.getBoundingClientRect();
     return r.width > 0 && r.height > 0 && r.bottom > 0 && r.right > 0;
   };
@@ -67,8 +82,18 @@
     const r = ratio(color, bg);
     checked += 1;
     if (r + 1e-6 < need) {
-      failures.push({ what, ratio: Math.round(r * 100) / 100, need, fg: cs.color, text: (el.textContent || el.value || el.placeholder || "").trim().slice(0, 40),
-        el: el.tagName.toLowerCase() + (el.className && typeof el.className === "string" ? "." + el.className.trim().split(/\s+/).join(".") : "") });
+      failures.push({
+        what,
+        ratio: Math.round(r * 100) / 100,
+        need,
+        fg: cs.color,
+        text: (el.textContent || el.value || el.placeholder || "").trim().slice(0, 40),
+        el:
+          el.tagName.toLowerCase() +
+          (el.className && typeof el.className === "string"
+            ? "." + el.className.trim().split(/\s+/).join(".")
+            : ""),
+      });
     }
   };
   for (const el of document.querySelectorAll("body *")) {
@@ -83,17 +108,33 @@
     }
     const ownText = [...el.childNodes].some((n) => n.nodeType === 3 && n.textContent.trim());
     if (ownText) check(el, parse(cs.color), backdrop(el), cs, "text");
-    if (el.matches("input:not([type=checkbox]):not([type=radio]):not([type=range]):not([type=file]), select, textarea")) {
+    if (
+      el.matches(
+        "input:not([type=checkbox]):not([type=radio]):not([type=range]):not([type=file]), select, textarea",
+      )
+    ) {
       if (el.value) check(el, parse(cs.color), backdrop(el), cs, "value");
-      if (el.placeholder && !el.value) check(el, parse(getComputedStyle(el, "::placeholder").color), backdrop(el), cs, "placeholder");
+      if (el.placeholder && !el.value)
+        check(
+          el,
+          parse(getComputedStyle(el, "::placeholder").color),
+          backdrop(el),
+          cs,
+          "placeholder",
+        );
       // The control's edge against what surrounds it.
       check(el, parse(cs.borderTopColor), backdrop(el.parentElement), cs, "control border", 3);
     }
     for (const pseudo of ["::before", "::after"]) {
       const ps = getComputedStyle(el, pseudo);
-      if (!/^"[^"]*[\p{L}\p{N}][^"]*"$/u.test(ps.content) || Number(ps.opacity) < 1 || ps.display === "none") continue;
+      if (
+        !/^"[^"]*[\p{L}\p{N}][^"]*"$/u.test(ps.content) ||
+        Number(ps.opacity) < 1 ||
+        ps.display === "none"
+      )
+        continue;
       check(el, parse(ps.color), backdrop(el, parse(ps.backgroundColor)), ps, `text ${pseudo}`);
     }
   }
   return { checked, failures };
-}
+};

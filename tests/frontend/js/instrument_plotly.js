@@ -9,7 +9,9 @@
   let plotly;
   Object.defineProperty(window, "Plotly", {
     configurable: true,
-    get() { return plotly; },
+    get() {
+      return plotly;
+    },
     set(P) {
       const react = P.react;
       const newPlot = P.newPlot;
@@ -32,7 +34,9 @@
         try {
           const type = JSON.parse(e.data).type;
           if (type === "delta" || type === "full") rec.frames.push(performance.now());
-        } catch { /* not JSON */ }
+        } catch {
+          /* not JSON */
+        }
       });
     }
   };

@@ -6,10 +6,12 @@
 ([content, plot]) => {
   window.__seen = { content: null, plot: null };
   const look = () => {
-    if (window.__seen.content === null && document.querySelector(content)) window.__seen.content = performance.now();
-    if (window.__seen.plot === null && document.querySelector(plot)) window.__seen.plot = performance.now();
+    if (window.__seen.content === null && document.querySelector(content))
+      window.__seen.content = performance.now();
+    if (window.__seen.plot === null && document.querySelector(plot))
+      window.__seen.plot = performance.now();
     return window.__seen.content !== null && window.__seen.plot !== null;
   };
   const watch = new MutationObserver(() => look() && watch.disconnect());
   watch.observe(document, { childList: true, subtree: true });
-}
+};

@@ -1,0 +1,41 @@
+/**
+ * Section 4: the table grid (axes, breakpoints, start values or a base map) for estimators
+ * that adapt a table, fitted to the dataset's preview. Other estimators hide the section.
+ */
+import { gridEditor } from "../../grid-editor.js";
+import { guessTable, needsTable } from "../../mapping.js";
+import { channels, selectedEstimators } from "./state.js";
+
+/** Show the grid editor when a chosen estimator needs a table; a new one per dataset. */
+export function renderTable(view) {
+  const { state, draft } = view;
+  const show = selectedEstimators(view).some(needsTable);
+  view.hosts.tableSection.hidden = !show;
+  if (!show) return;
+  const chans = channels(view);
+  const wanted = state.axes.length ? state.axes : guessTable(chans).axes;
+  if (state.grid && state.grid.datasetId === state.datasetId) return state.grid.redraw();
+  state.grid?.destroy();
+  const savedAxes = draft?.grid?.axes?.map((a) => a.name);
+  const saved = draft?.grid && sameNames(savedAxes, wanted) ? draft.grid : null;
+  if (draft) draft.grid = null;
+  const g = gridEditor({
+    channels: chans,
+    preview: state.preview,
+    axes: wanted,
+    baseMaps: view.baseMaps,
+    saved,
+    onChange: () => {
+      view.syncUrl();
+      view.saveDraft();
+    },
+  });
+  g.datasetId = state.datasetId;
+  state.grid = g;
+  view.hosts.table.replaceChildren(g.el);
+  return undefined;
+}
+
+function sameNames(a, b) {
+  return Array.isArray(a) && a.length === b.length && a.every((x, i) => x === b[i]);
+}

@@ -1,0 +1,121 @@
+/**
+ * The run options section: the run's name, its pace (a real-time multiple, to watch a
+ * recorded cycle adapt), how often a map version is kept, and the sample gates.
+ */
+import { PACES } from "../../constants.js";
+import { h } from "../../dom.js";
+import { gatesEditor } from "./gates.js";
+
+/**
+ * The options, restored from the draft. Returns {el, name(), read(), gates}: read() gives the
+ * service options every run of the form shares (pace, version_every, gates).
+ */
+export function runOptions(view) {
+  const { draft } = view;
+  const runName = h("input", {
+    type: "text",
+    id: "run-name",
+    name: "name",
+    placeholder: "optional",
+  });
+  const pace = h(
+    "select",
+    { id: "run-pace", name: "config.pace" },
+    PACES.map((p) => h("option", { value: p.value }, p.label)),
+  );
+  const paceCustom = h("input", {
+    type: "number",
+    id: "run-pace-custom",
+    min: "0.01",
+    step: "any",
+    value: "10",
+    hidden: true,
+    "aria-label": "Custom pace (real-time multiple)",
+  });
+  pace.addEventListener("change", () => {
+    paceCustom.hidden = pace.value !== "custom";
+  });
+  const cadence = h(
+    "select",
+    { id: "run-cadence", name: "config.version_every" },
+    h("option", { value: "" }, "Every 10 % of the log"),
+    h("option", { value: "seconds" }, "Every N seconds of log"),
+    h("option", { value: "samples" }, "Every N samples"),
+  );
+  const cadenceN = h("input", {
+    type: "number",
+    id: "run-cadence-n",
+    min: "1",
+    step: "any",
+    value: "10",
+    hidden: true,
+    "aria-label": "Version cadence N",
+  });
+  cadence.addEventListener("change", () => {
+    cadenceN.hidden = !cadence.value;
+  });
+  const gates = gatesEditor(view, draft?.gates ?? []);
+  if (draft) {
+    runName.value = draft.options?.["run-name"] ?? "";
+    const restore = [
+      [pace, "run-pace"],
+      [paceCustom, "run-pace-custom"],
+      [cadence, "run-cadence"],
+      [cadenceN, "run-cadence-n"],
+    ];
+    for (const [el, id] of restore) {
+      const v = draft.options?.[id];
+      if (typeof v === "string" && v !== "") el.value = v;
+    }
+    paceCustom.hidden = pace.value !== "custom";
+    cadenceN.hidden = !cadence.value;
+  }
+
+  const el = h(
+    "div",
+    {},
+    h(
+      "div",
+      { class: "fields" },
+      h("div", { class: "field" }, h("label", { for: "run-name" }, "Run name"), runName),
+      h(
+        "div",
+        { class: "field" },
+        h("label", { for: "run-pace" }, "Pace"),
+        pace,
+        paceCustom,
+        h(
+          "div",
+          { class: "help" },
+          "Real-time multiple: replay a recorded cycle slowly enough to watch it adapt.",
+        ),
+      ),
+      h(
+        "div",
+        { class: "field" },
+        h("label", { for: "run-cadence" }, "Keep a map version"),
+        cadence,
+        cadenceN,
+      ),
+    ),
+    h("div", { class: "label" }, "Sample gates"),
+    h(
+      "p",
+      { class: "help", style: { marginTop: 0 } },
+      "Reject samples outside a range, changing too fast, or shortly after an event.",
+    ),
+    gates.el,
+    gates.addButton,
+  );
+
+  const read = () => {
+    const out = {};
+    if (pace.value === "custom") out.pace = Number(paceCustom.value);
+    else if (pace.value !== "max") out.pace = Number(pace.value);
+    if (cadence.value) out.version_every = { [cadence.value]: Number(cadenceN.value) };
+    const gateList = gates.read();
+    if (gateList.length) out.gates = gateList;
+    return out;
+  };
+  return { el, gates, read, name: () => runName.value.trim() };
+}
