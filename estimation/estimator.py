@@ -1,24 +1,27 @@
-"""The interface every estimator implements, and the registry of estimators by name.
+"""The interface every estimator implements, and the base class that implements most of it.
 
 An estimator is built from a typed config (a pydantic model whose JSON schema the dashboard
 renders as a form), declares the channels it needs, and ``run``s over a :class:`Signals`
 block in compiled chunks, yielding a :class:`Snapshot` after each chunk. Its state is
 explicit and serialisable: ``run(..., state=snapshot.state)`` resumes to a result identical
-to an uninterrupted run.
+to an uninterrupted run. :class:`ChunkedEstimator` holds that loop once; the registry of
+estimators by name is :mod:`estimation.registry`.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from abc import ABC, abstractmethod
+from collections.abc import Iterator
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any, Generic, Protocol, TypeVar
 
 import numpy as np
 from pydantic import BaseModel, ValidationError
 
-from estimation.errors import ConfigError
+from estimation.errors import ConfigError, StateError
 from estimation.signals import Signals
-from estimation.table import Table
+from estimation.state import EstimatorState
+from estimation.table import Grid, Table
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -58,6 +61,8 @@ class Estimator(Protocol):
 
     def required_signals(self) -> list[str]: ...
 
+    def signal_roles(self) -> dict[str, list[str]]: ...
+
     def run(
         self,
         signals: Signals,
@@ -67,37 +72,152 @@ class Estimator(Protocol):
         accept: np.ndarray | None = None,
     ) -> Iterator[Snapshot]: ...
 
+    def fit(self, signals: Signals, *, accept: np.ndarray | None = None) -> Snapshot: ...
 
-@dataclass(frozen=True, slots=True)
-class EstimatorSpec:
-    """A registered estimator: its name, what it is, where it comes from, how to build it."""
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Chunk:
+    """Log samples ``first:sample`` just run, and their per-sample ``outputs``."""
+
+    first: int
+    sample: int
+    outputs: dict[str, np.ndarray]
+
+
+S = TypeVar("S", bound=EstimatorState)
+P = TypeVar("P")
+
+
+class ChunkedEstimator(ABC, Generic[S, P]):
+    """The chunked run loop, ``fit`` and the state check every estimator shares.
+
+    A subclass turns a log into kernel inputs once (:meth:`prepare`), says how many kernel
+    steps the log has (:meth:`steps`), makes the first state (:meth:`start`), advances a
+    state over one chunk (:meth:`advance`) and adds its part to each snapshot
+    (:meth:`report`); it checks whatever else a resumed state must satisfy in
+    :meth:`check_fit`.
+    """
 
     name: str
-    title: str
-    description: str
-    paper: str
-    config_model: type[BaseModel]
-    factory: Callable[[BaseModel], Estimator]
-    produces_map: bool = True
+    config: BaseModel
+    state_class: type[S]
+    grid: Grid | None = None  # the map's grid, when the state's ``theta`` holds its values
+    noun: str = "estimator"  # in messages: "state of a 'kf' filter cannot resume 'skf'"
 
-    def build(self, config: BaseModel | dict[str, Any]) -> Estimator:
-        """Validate ``config`` against the estimator's model and build the estimator."""
-        if not isinstance(config, self.config_model):
-            try:
-                config = self.config_model.model_validate(config)
-            except ValidationError as exc:
-                raise ConfigError(f"{self.name}: {describe_validation_error(exc)}") from exc
-        return self.factory(config)
+    @abstractmethod
+    def required_signals(self) -> list[str]:
+        """Every channel the estimator reads."""
 
-    def catalog_entry(self) -> dict[str, Any]:
-        return {
-            "name": self.name,
-            "title": self.title,
-            "description": self.description,
-            "paper": self.paper,
-            "produces_map": self.produces_map,
-            "config_schema": self.config_model.model_json_schema(),
-        }
+    @abstractmethod
+    def signal_roles(self) -> dict[str, list[str]]:
+        """The channels it reads by role: ``axis``, ``output``, ``input``."""
+
+    @abstractmethod
+    def output_names(self) -> tuple[str, ...]:
+        """The per-sample series of every snapshot's ``outputs``."""
+
+    @abstractmethod
+    def prepare(self, signals: Signals, accept: np.ndarray | None = None) -> P:
+        """Validate the log (and accept mask) and turn it into kernel inputs."""
+
+    @abstractmethod
+    def steps(self, prepared: P) -> int:
+        """Kernel steps in the prepared log (where ``state.step`` ends)."""
+
+    @abstractmethod
+    def start(self, signals: Signals, prepared: P) -> S:
+        """The state before the first step."""
+
+    @abstractmethod
+    def advance(self, state: S, prepared: P, stop: int) -> tuple[S, dict[str, np.ndarray], Any]:
+        """Run steps ``state.step:stop``; return the new state, the chunk's outputs and
+        per-sample status (as :meth:`snapshot` takes them). ``state`` is not modified."""
+
+    @abstractmethod
+    def times(self, prepared: P) -> np.ndarray:
+        """The log's sample times [s]."""
+
+    def log_sample(self, step: int, prepared: P) -> int:
+        """Log samples accounted for after ``step`` kernel steps (more when a step pairs a
+        measurement with an earlier operating point)."""
+        return step
+
+    def report(self, state: S, prepared: P, chunk: Chunk) -> dict[str, Any]:
+        """The family's part of the snapshot after ``chunk``: ``outputs``, and ``table``,
+        ``variance``, ``rejected``, ``metrics`` as it has them."""
+        return {"outputs": chunk.outputs}
+
+    def snapshot(
+        self, state: S, prepared: P, start: int, outputs: dict[str, np.ndarray], status: Any
+    ) -> Snapshot:
+        """The report after the chunk that began at step ``start`` and ended at ``state``."""
+        time = self.times(prepared)
+        first = self.log_sample(start, prepared)
+        sample = self.log_sample(state.step, prepared)
+        return Snapshot(
+            estimator=self.name,
+            sample=sample,
+            n_samples=int(time.size),
+            time_s=float(time[max(sample - 1, 0)]),
+            state=state,
+            chunk_start=first,
+            status=status,
+            **self.report(state, prepared, Chunk(first, sample, outputs)),
+        )
+
+    def check_fit(self, state: S) -> None:
+        """Raise :class:`StateError` if ``state`` does not fit this estimator's shapes."""
+
+    def check_state(self, state: Any, steps: int) -> None:
+        """``state`` must be this estimator's class and kind, fit it, and be within the log."""
+        if not isinstance(state, self.state_class):
+            raise StateError(f"{self.name} cannot resume from a {type(state).__name__}")
+        if state.kind != self.name:
+            raise StateError(f"state of a {state.kind!r} {self.noun} cannot resume {self.name!r}")
+        theta = getattr(state, "theta", None)
+        if self.grid is not None and theta is not None and theta.size != self.grid.size:
+            raise StateError(f"state has {theta.size} cells, the table {self.grid.size}")
+        self.check_fit(state)
+        if not 0 <= state.step <= steps:
+            raise StateError(f"state is at step {state.step}, the log has {steps} steps")
+
+    def run(
+        self,
+        signals: Signals,
+        *,
+        every: int | None = None,
+        state: S | None = None,
+        accept: np.ndarray | None = None,
+    ) -> Iterator[Snapshot]:
+        """Run over the whole log in chunks of ``every`` steps, yielding a snapshot after each.
+
+        ``state`` (from a snapshot, or the state class's ``from_dict``/``load``) resumes where
+        it stopped, to a result identical to an uninterrupted run; a finished state yields
+        one snapshot without outputs.
+        """
+        prepared = self.prepare(signals, accept)
+        steps = self.steps(prepared)
+        if state is None:
+            state = self.start(signals, prepared)
+        self.check_state(state, steps)
+        chunk = steps if every is None else int(every)
+        if chunk < 1:
+            raise ConfigError(f"every must be >= 1 sample, got {every}")
+        if state.step == steps:
+            yield self.snapshot(state, prepared, steps, {}, np.empty(0, np.int8))
+            return
+        while state.step < steps:
+            start = state.step
+            state, outputs, status = self.advance(state, prepared, min(start + chunk, steps))
+            yield self.snapshot(state, prepared, start, outputs, status)
+
+    def fit(self, signals: Signals, *, accept: np.ndarray | None = None) -> Snapshot:
+        """Run over the whole log in one chunk and return the final snapshot."""
+        last = None
+        for last in self.run(signals, accept=accept):  # noqa: B007
+            pass
+        assert last is not None
+        return last
 
 
 def describe_validation_error(exc: ValidationError) -> str:
@@ -108,21 +228,3 @@ def describe_validation_error(exc: ValidationError) -> str:
         loc = ".".join(str(p) for p in err["loc"])
         parts.append(f"{loc}: {message}" if loc else message)
     return "; ".join(parts)
-
-
-def registry() -> dict[str, EstimatorSpec]:
-    """Every built-in estimator by name."""
-    from estimation.filters.estimator import FILTER_SPECS
-    from estimation.observers.ekf import EKF_SPECS
-    from estimation.observers.lpv import LPV_SPECS
-    from estimation.torque import TORQUE_SPECS
-
-    return {spec.name: spec for spec in (*FILTER_SPECS, *LPV_SPECS, *EKF_SPECS, *TORQUE_SPECS)}
-
-
-def get_spec(name: str) -> EstimatorSpec:
-    specs = registry()
-    try:
-        return specs[name]
-    except KeyError:
-        raise ConfigError(f"unknown estimator {name!r}; choose one of {sorted(specs)}") from None

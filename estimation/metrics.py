@@ -1,17 +1,27 @@
-"""Metrics shared by all runs (ALGORITHMS.md §7).
+"""Metrics shared by all runs (docs/algorithms.md §7).
 
 Map metrics compare an estimated table with the true one on the cells the data excited;
 output metrics summarise an error series; torque metrics are TQ (60)–(62).
+:func:`score_run` puts them together for a finished run, as the service's worker and
+``mapwise run`` report it.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import contextlib
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from estimation.errors import ShapeError
+from estimation.errors import EstimationError, ShapeError
 from estimation.table import Table
+
+if TYPE_CHECKING:
+    from estimation.scenarios import ScenarioData
+
+STATUS_ACCEPTED = 0
+TORQUE_WINDOW_S = (5.0, 30.0)  # TQ §VI: indices over 5–30 s
 
 
 def cell_visits(table: Table, U: np.ndarray) -> np.ndarray:
@@ -31,7 +41,7 @@ def map_metrics(
 
     * ``rmse``, ``max_abs_error`` — over the visited cells (accumulated weight ≥ ``min_visits``),
       in the table's unit;
-    * ``mean_relative_error`` — LPV §4 as defined in ALGORITHMS.md §3, robust where the map
+    * ``mean_relative_error`` — LPV §4 as defined in docs/algorithms.md §3, robust where the map
       crosses zero: ``Σ_k |T̂(υ_k) − T(υ_k)| / Σ_k |T(υ_k)|`` along the trajectory;
     * ``coverage`` — fraction of cells visited; ``visited_cells`` their number.
     """
@@ -100,3 +110,75 @@ def convergence_time(time_s: np.ndarray, error: np.ndarray, threshold: float) ->
         return float(t[0])
     last_above = int(np.nonzero(above)[0][-1])
     return float(t[last_above + 1])
+
+
+def series_metrics(data: ScenarioData, outputs: Mapping[str, np.ndarray]) -> dict[str, float]:
+    """Score every estimator output the scenario has a true series for: ``torque_nm`` by
+    TQ (60)–(62) over 5–30 s of the record (``ise``, ``mae``, ``sd``), any other series by
+    its ``rmse`` (error = truth − estimate)."""
+    metrics: dict[str, float] = {}
+    for name, truth in data.scored_series.items():
+        estimate = outputs.get(name)
+        if estimate is None or estimate.shape != truth.shape:
+            continue
+        error = truth - estimate
+        if name == "torque_nm":
+            t = data.signals.time
+            window = (t[0] + TORQUE_WINDOW_S[0], min(t[0] + TORQUE_WINDOW_S[1], t[-1]))
+            metrics |= torque_metrics(t, error, window_s=window)
+        else:
+            metrics["rmse"] = output_metrics(error)["rmse"]
+    return metrics
+
+
+def score_run(
+    outputs: Mapping[str, np.ndarray],
+    status: np.ndarray | None,
+    *,
+    table: Table | None = None,
+    truth: ScenarioData | None = None,
+) -> dict[str, float]:
+    """The known-truth and output metrics of a finished run.
+
+    ``outputs`` are the estimator's per-sample series over the whole record (as the
+    snapshots' ``outputs`` concatenated), ``status`` the per-sample status (0 accepted;
+    ``None``: all accepted), ``table`` the final map and ``truth`` the scenario realisation
+    the log came from (``None`` for a log without truth). Returns
+
+    * ``output_rmse`` — RMS of ``residual`` over the accepted samples where it is finite,
+      if there are any;
+    * with a true map on the same grid as ``table``: :func:`map_metrics` along the
+      scenario's scoring points, its ``rmse`` renamed ``map_rmse`` when the scenario also
+      scores series;
+    * :func:`series_metrics` of the outputs that are finite throughout (a record too short
+      for the torque window gives no torque metrics rather than an error).
+
+    Values may be NaN (e.g. no visited cell); callers decide how to show them.
+    """
+    metrics: dict[str, float] = {}
+    residual = outputs.get("residual")
+    if residual is not None:
+        residual = np.asarray(residual, dtype=np.float64)
+        ok = np.isfinite(residual)
+        if status is not None and status.shape == residual.shape:
+            ok &= status == STATUS_ACCEPTED
+        if ok.any():
+            metrics["output_rmse"] = output_metrics(residual[ok])["rmse"]
+    if truth is None:
+        return metrics
+    true_map = truth.true_map
+    if table is not None and true_map is not None and _same_grid(table, true_map):
+        found = map_metrics(table, true_map, truth.scoring_points())
+        if truth.scored_series:
+            found["map_rmse"] = found.pop("rmse")
+        metrics |= found
+    finite = {k: np.asarray(v) for k, v in outputs.items() if np.all(np.isfinite(v))}
+    with contextlib.suppress(EstimationError):
+        metrics |= series_metrics(truth, finite)
+    return metrics
+
+
+def _same_grid(a: Table, b: Table) -> bool:
+    return a.shape == b.shape and all(
+        np.array_equal(x.breakpoints, y.breakpoints) for x, y in zip(a.axes, b.axes, strict=True)
+    )

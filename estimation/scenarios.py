@@ -15,11 +15,9 @@ from typing import Any
 import numpy as np
 
 from estimation.errors import ConfigError
+from estimation.registry import EstimatorKind, names
 from estimation.signals import Signals
 from estimation.table import Table
-
-TABLE_FILTERS = ("kf", "skf", "sskf", "rls", "nlms")
-TORQUE_ESTIMATORS = ("uio", "smo", "dirty", "adaptive-const", "adaptive-tv")
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -108,7 +106,7 @@ def table_filter_config(
 ) -> dict[str, Any] | None:
     """A config for one of the five table filters on ``table``'s grid (only the keys that
     filter understands); ``None`` for any other estimator."""
-    if estimator not in TABLE_FILTERS:
+    if estimator not in names(EstimatorKind.MAP_FILTER):
         return None
     config: dict[str, Any] = {
         "axes": [a.to_dict() for a in table.axes],
@@ -184,7 +182,7 @@ def _nox(name: str, cycle: str, description: str, duration_s: float) -> Scenario
     def build(seed: int, duration: float | None) -> ScenarioData:
         from estimation.cycles import load_cycle, make_sdmp
         from estimation.plants.nox import simulate_nox
-        from estimation.vehicle import operating_points
+        from estimation.plants.vehicle import operating_points
 
         drive = make_sdmp(seed=seed) if cycle == "sdmp" else load_cycle(cycle)
         points = operating_points(drive, rate_hz=rate_hz)
@@ -227,7 +225,7 @@ def _nox(name: str, cycle: str, description: str, duration_s: float) -> Scenario
             # constant regressor (idle, cruises of up to 3451 samples), so with λ = 0.995
             # P reached P0·λ^-3451 ≈ 3e10 and noise drove cells to ±25 000 ppm (map error
             # 1763–6855 %, seeds 0–2). Hence a 20 s memory, 1/(1−λ) = 1000 samples, and the
-            # covariance limit at P0 (EKF §4, ALGORITHMS.md §2.5) so no dwell can wind it up;
+            # covariance limit at P0 (EKF §3.1, docs/algorithms.md §2.5) so no dwell can wind it up;
             # P0 = 1000 is normalised by σv², a prior σ of √1000·25 ≈ 790 ppm.
             # See tests/estimation/test_rls_windup.py.
             config |= {"forgetting": 0.999, "p0": 1000.0, "limit": "p0"}
@@ -267,8 +265,10 @@ def _maf(name: str, cycle: str, kind: str, description: str, duration_s: float) 
 
     def build(seed: int, duration: float | None) -> ScenarioData:
         from estimation.cycles import load_cycle
-        from estimation.plants.airpath import MafErrorSpec, NoiseSpec, simulate_airpath
-        from estimation.vehicle import DieselEngine, operating_points
+        from estimation.plants.airpath import simulate_airpath
+        from estimation.plants.airpath_sensors import MafErrorSpec, NoiseSpec
+        from estimation.plants.engine import DieselEngine
+        from estimation.plants.vehicle import operating_points
 
         engine = None
         if cycle == "whtc":
@@ -340,7 +340,7 @@ def _maf_config(estimator: str, kind: str, suggested: tuple[str, ...]) -> dict[s
     if estimator == "ekf-map":
         if kind != "1d":
             return None
-        from estimation.plants.airpath import MafErrorSpec
+        from estimation.plants.airpath_sensors import MafErrorSpec
 
         table = MafErrorSpec.relative_1d().table
         assert table is not None
@@ -368,9 +368,9 @@ def _torque(name: str, description: str, channels: tuple[tuple[str, str], ...]) 
         )
 
     def configs(estimator: str) -> dict[str, Any] | None:
-        from estimation.plants.torque import DieselRigParams, SiEngineParams
+        from estimation.plants.torque_params import DieselRigParams, SiEngineParams
 
-        if estimator not in TORQUE_ESTIMATORS:
+        if estimator not in names(EstimatorKind.TORQUE):
             return None
         params = SiEngineParams() if name == "torque-si" else DieselRigParams()
         config: dict[str, Any] = {"J_nm_s_per_rpm": params.J_nm_s_per_rpm}
@@ -384,7 +384,7 @@ def _torque(name: str, description: str, channels: tuple[tuple[str, str], ...]) 
         rate_hz=rate_hz,
         duration_s=30.0,
         channels=channels,
-        suggested=TORQUE_ESTIMATORS,
+        suggested=names(EstimatorKind.TORQUE),
         builder=build,
         configs=configs,
     )

@@ -1,4 +1,4 @@
-"""Look-up tables with named axes and their sparse interpolation regressor (ALGORITHMS.md §1).
+"""Look-up tables with named axes and their sparse interpolation regressor (docs/algorithms.md §1).
 
 A table with ``d`` axes stores its values as an array of shape ``(n_1, …, n_d)``; filters
 work on the flat C-order vector ``θ`` of length ``p = Π n_a``. For an input ``u`` the output is

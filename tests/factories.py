@@ -15,10 +15,11 @@ from typing import Any
 
 import numpy as np
 
+from estimation.registry import EstimatorKind, get_spec, names
 from estimation.signals import Signals
 
-KINDS = ("kf", "skf", "sskf", "rls", "nlms")
-SENSOR_KINDS = ("kf", "skf")
+KINDS = names(EstimatorKind.MAP_FILTER)
+SENSOR_KINDS = tuple(k for k in KINDS if "sensor" in get_spec(k).config_model.model_fields)
 
 
 @dataclass(frozen=True)
@@ -77,7 +78,10 @@ class Problem:
         return Signals(0.02 * np.arange(self.n), channels)
 
     def config(self, kind: str) -> dict[str, Any]:
-        """The config dict of filter ``kind`` (nested lists in table shape for cell values)."""
+        """The config dict of filter ``kind`` (nested lists in table shape for cell values):
+        the common keys, and of the others those the filter's config model has."""
+        if kind not in KINDS:
+            raise ValueError(kind)
         shape = self.shape
         cfg: dict[str, Any] = {
             "axes": [
@@ -90,32 +94,22 @@ class Problem:
             "gate_sigma": self.gate_sigma,
             "sigma_v": self.sigma_v,
         }
-        limit = "p0" if self.limit else "none"
-        if kind in ("kf", "skf"):
-            cfg |= {
-                "sigma_w": self.sigma_w.reshape(shape).tolist(),
-                "p0": self.p0.reshape(shape).tolist(),
-                "limit": limit,
+        specific: dict[str, Any] = {
+            "sigma_w": self.sigma_w.reshape(shape).tolist(),
+            "p0": self.p0.reshape(shape).tolist(),
+            "limit": "p0" if self.limit else "none",
+            "forgetting": self.forgetting,
+            "mu": self.mu,
+            "eps": self.eps,
+        }
+        if self.sensor is not None:
+            specific["sensor"] = {
+                "lag": self.sensor.lag,
+                "delay_samples": self.sensor.delay,
+                "sigma_f": self.sensor.sigma_f,
             }
-            if self.sensor is not None:
-                cfg["sensor"] = {
-                    "lag": self.sensor.lag,
-                    "delay_samples": self.sensor.delay,
-                    "sigma_f": self.sensor.sigma_f,
-                }
-        elif kind == "sskf":
-            cfg["sigma_w"] = self.sigma_w.reshape(shape).tolist()
-        elif kind == "rls":
-            cfg |= {
-                "forgetting": self.forgetting,
-                "p0": self.p0.reshape(shape).tolist(),
-                "limit": limit,
-            }
-        elif kind == "nlms":
-            cfg |= {"mu": self.mu, "eps": self.eps}
-        else:
-            raise ValueError(kind)
-        return cfg
+        fields = get_spec(kind).config_model.model_fields
+        return cfg | {key: value for key, value in specific.items() if key in fields}
 
     def without_sensor(self) -> Problem:
         return replace(self, sensor=None)

@@ -1,4 +1,4 @@
-"""Drive and engine test cycles (ALGORITHMS.md §6, data and licences in ``data/SOURCES.md``).
+"""Drive and engine test cycles (docs/algorithms.md §6, data and licences in ``data/SOURCES.md``).
 
 >>> from estimation.cycles import load_cycle
 >>> load_cycle("udds").duration_s

@@ -1,4 +1,4 @@
-"""Map-updating filters for look-up tables: KF, SKF, SSKF, RLS, NLMS (ALGORITHMS.md §2)."""
+"""Map-updating filters for look-up tables: KF, SKF, SSKF, RLS, NLMS (docs/algorithms.md §2)."""
 
 from estimation.filters.estimator import FILTER_SPECS, TableFilter
 from estimation.filters.functions import initial_state, run_chunk, variance

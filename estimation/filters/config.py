@@ -47,7 +47,7 @@ class AxisConfig(_Strict):
 
 class SensorConfig(_Strict):
     """First-order sensor lag and transport delay between the table and the measurement
-    (ALGORITHMS.md §2.6, SKF (23)–(33)): ``y_M(k) = a·y_M(k−1) + (1−a)·T(u_{k−τ})``."""
+    (docs/algorithms.md §2.6, SKF (23)–(33)): ``y_M(k) = a·y_M(k−1) + (1−a)·T(u_{k−τ})``."""
 
     lag: float = Field(0.96, ge=0.0, lt=1.0, description="Discrete lag pole a (per sample).")
     delay_s: float | None = Field(
@@ -97,7 +97,7 @@ class _Covariance(TableFilterConfig):
     p0: CellValues = Field(0.0, description="Initial variance P0 of each cell.")
     limit: Literal["none", "p0"] = Field(
         "none",
-        description="Covariance limiting (EKF §4): 'p0' caps each variance at P0 "
+        description="Covariance limiting (EKF §3.1): 'p0' caps each variance at P0 "
         "(PSD-preserving row/column scaling).",
     )
 

@@ -1,15 +1,15 @@
-"""The five map-updating filters behind the :class:`~estimation.estimator.Estimator` interface."""
+"""The five map-updating filters behind the :class:`~estimation.estimator.Estimator` interface
+and their registry specs."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
-from pydantic import BaseModel
 
-from estimation.errors import ConfigError, ShapeError, StateError
-from estimation.estimator import EstimatorSpec, Snapshot
+from estimation.errors import ConfigError, ShapeError
+from estimation.estimator import Chunk, ChunkedEstimator
 from estimation.filters.config import (
     KfConfig,
     NlmsConfig,
@@ -20,7 +20,8 @@ from estimation.filters.config import (
 )
 from estimation.filters.functions import initial_state, run_chunk, variance
 from estimation.filters.settings import FilterSettings, grid_of, initial_table, resolve_settings
-from estimation.filters.state import FilterState
+from estimation.filters.state import FilterState, KfState, LocalState, ThetaState
+from estimation.registry import EstimatorKind, family
 from estimation.signals import Signals
 from estimation.table import Table
 
@@ -43,8 +44,15 @@ class Prepared:
     settings: FilterSettings
 
 
-class TableFilter:
-    """A map-updating filter over a look-up table whose axes and output are log channels."""
+class TableFilter(ChunkedEstimator[FilterState, Prepared]):
+    """A map-updating filter over a look-up table whose axes and output are log channels.
+
+    ``run``, ``fit`` and the state check are :class:`~estimation.estimator.ChunkedEstimator`'s;
+    a kernel step pairs a measurement with the operating point ``τ`` samples before it.
+    """
+
+    state_class = FilterState
+    noun = "filter"
 
     def __init__(self, name: str, config: TableFilterConfig) -> None:
         self.name = name
@@ -55,6 +63,12 @@ class TableFilter:
 
     def required_signals(self) -> list[str]:
         return [a.name for a in self.config.axes] + [self.config.output]
+
+    def signal_roles(self) -> dict[str, list[str]]:
+        return {"axis": [a.name for a in self.config.axes], "output": [self.config.output]}
+
+    def output_names(self) -> tuple[str, ...]:
+        return ("prediction", "residual")
 
     def prepare(self, signals: Signals, accept: np.ndarray | None = None) -> Prepared:
         """Regressor, aligned measurements and settings for a whole log.
@@ -91,147 +105,109 @@ class TableFilter:
         y_m0 = float(prepared.y[0]) if prepared.settings.has_sensor else None
         return initial_state(self.name, self.theta0.flat, prepared.settings, y_m0=y_m0)
 
-    def run(
-        self,
-        signals: Signals,
-        *,
-        every: int | None = None,
-        state: FilterState | None = None,
-        accept: np.ndarray | None = None,
-    ) -> Iterator[Snapshot]:
-        """Filter the whole log in chunks of ``every`` samples, yielding a snapshot after each.
+    def steps(self, prepared: Prepared) -> int:
+        return int(prepared.y.size)
 
-        ``state`` (from a snapshot, or :meth:`FilterState.load`) resumes where it stopped.
-        """
-        prepared = self.prepare(signals, accept)
+    def start(self, signals: Signals, prepared: Prepared) -> FilterState:
+        return self.initial_state(prepared)
+
+    def advance(
+        self, state: FilterState, prepared: Prepared, stop: int
+    ) -> tuple[FilterState, dict[str, np.ndarray], np.ndarray]:
+        """One :func:`run_chunk`; the first chunk is padded with the ``τ`` delay samples,
+        which have no prediction (status 3)."""
+        start = state.step
         tau = prepared.settings.delay
-        steps = prepared.y.size
-        if state is None:
-            state = self.initial_state(prepared)
-        self._check_state(state, steps)
-        chunk = steps if every is None else int(every)
-        if chunk < 1:
-            raise ConfigError(f"every must be >= 1 sample, got {every}")
-        if state.step == steps:
-            yield self._snapshot(state, prepared, state.step, np.empty(0), np.empty(0, np.int8))
-            return
-        while state.step < steps:
-            start = state.step
-            stop = min(start + chunk, steps)
-            state, yhat, status = run_chunk(
-                state,
-                prepared.idx[start:stop],
-                prepared.w[start:stop],
-                prepared.y[start:stop],
-                prepared.accept[start:stop],
-                prepared.settings,
-            )
-            if start == 0 and tau:
-                yhat = np.concatenate([np.full(tau, np.nan), yhat])
-                status = np.concatenate([np.full(tau, STATUS_DELAY, np.int8), status])
-            yield self._snapshot(state, prepared, start, yhat, status)
+        sl = slice(start, stop)
+        state, yhat, status = run_chunk(
+            state,
+            prepared.idx[sl],
+            prepared.w[sl],
+            prepared.y[sl],
+            prepared.accept[sl],
+            prepared.settings,
+        )
+        if start == 0 and tau:
+            yhat = np.concatenate([np.full(tau, np.nan), yhat])
+            status = np.concatenate([np.full(tau, STATUS_DELAY, np.int8), status])
+        return state, {"prediction": yhat}, status
 
-    def fit(self, signals: Signals, *, accept: np.ndarray | None = None) -> Snapshot:
-        """Run over the whole log in one chunk and return the final snapshot."""
-        last = None
-        for last in self.run(signals, accept=accept):  # noqa: B007
-            pass
-        assert last is not None
-        return last
+    def times(self, prepared: Prepared) -> np.ndarray:
+        return prepared.time_s
 
-    def _check_state(self, state: FilterState, steps: int) -> None:
-        if state.kind != self.name:
-            raise StateError(f"state of a {state.kind!r} filter cannot resume {self.name!r}")
-        if state.theta.size != self.grid.size:
-            raise StateError(f"state has {state.theta.size} cells, the table {self.grid.size}")
-        if not 0 <= state.step <= steps:
-            raise StateError(f"state is at step {state.step}, the log has {steps} usable steps")
+    def log_sample(self, step: int, prepared: Prepared) -> int:
+        return step + prepared.settings.delay if step else 0
 
-    def _snapshot(
-        self,
-        state: FilterState,
-        prepared: Prepared,
-        start: int,
-        yhat: np.ndarray,
-        status: np.ndarray,
-    ) -> Snapshot:
-        tau = prepared.settings.delay
-        n = prepared.time_s.size
-        sample = state.step + tau
-        first = 0 if start == 0 else start + tau
-        measured = prepared.measured[first:sample]
+    def report(self, state: FilterState, prepared: Prepared, chunk: Chunk) -> dict[str, Any]:
+        yhat = chunk.outputs.get("prediction", np.empty(0))
         var = variance(state, prepared.settings)
-        return Snapshot(
-            estimator=self.name,
-            sample=sample,
-            n_samples=n,
-            time_s=float(prepared.time_s[sample - 1]) if sample else float(prepared.time_s[0]),
-            state=state,
-            chunk_start=first,
-            table=Table(self.grid.axes, state.theta.reshape(self.grid.shape)),
-            variance=None if var is None else var.reshape(self.grid.shape),
-            outputs={"prediction": yhat, "residual": measured - yhat},
-            status=status,
-            rejected={
+        return {
+            "table": Table(self.grid.axes, state.theta.reshape(self.grid.shape)),
+            "variance": None if var is None else var.reshape(self.grid.shape),
+            "outputs": {
+                "prediction": yhat,
+                "residual": prepared.measured[chunk.first : chunk.sample] - yhat,
+            },
+            "rejected": {
                 "mask": state.rejected_mask,
                 "innovation": state.rejected_gate,
-                "delay": tau,
+                "delay": prepared.settings.delay,
             },
-        )
+        }
 
 
-def _filter_spec(
-    name: str, title: str, description: str, config_model: type[TableFilterConfig]
-) -> EstimatorSpec:
-    def factory(config: BaseModel) -> TableFilter:
-        assert isinstance(config, TableFilterConfig)
-        return TableFilter(name, config)
-
-    return EstimatorSpec(
-        name=name,
-        title=title,
-        description=description,
-        paper="Guardiola, Pla, Blanco-Rodriguez & Eriksson (2014), Control Engineering "
-        "Practice — the SKF paper",
-        config_model=config_model,
-        factory=factory,
-    )
-
-
-FILTER_SPECS = (
-    _filter_spec(
-        "kf",
-        "Kalman filter (full covariance)",
-        "Optimal random-walk Kalman filter over every cell; O(p²) per sample. The reference "
-        "the cheaper filters are judged against (SKF §4.4).",
-        KfConfig,
-    ),
-    _filter_spec(
-        "skf",
-        "Simplified Kalman filter",
-        "Kalman update of the active cell only, variances of all cells kept, cross-covariances "
-        "forgotten when a cell leaves; cost independent of table size (SKF §4.7).",
-        SkfConfig,
-    ),
-    _filter_spec(
-        "sskf",
-        "Steady-state Kalman filter",
-        "Fixed gains from the steady state of the local filter; no covariance, fastest, "
-        "but fragile under poor excitation (SKF §4.5).",
-        SskfConfig,
-    ),
-    _filter_spec(
-        "rls",
-        "Recursive least squares (local, forgetting)",
-        "RLS with exponential forgetting applied to the active cells only, so unexcited cells "
-        "do not wind up (Peyton Jones & Muske style baseline).",
-        RlsConfig,
-    ),
-    _filter_spec(
-        "nlms",
-        "Normalised LMS",
-        "Distributes each error over the active cells in proportion to their weights; "
-        "the classic ECU adaptation baseline.",
-        NlmsConfig,
-    ),
+_spec = family(
+    TableFilter,
+    TableFilterConfig,
+    kind=EstimatorKind.MAP_FILTER,
+    paper="Guardiola, Pla, Blanco-Rodriguez & Eriksson (2014), Control Engineering Practice "
+    "— the SKF paper",
 )
+_UNITS = {"prediction": "", "residual": ""}  # both in the unit of the table's output
+
+KF = _spec(
+    "kf",
+    "Kalman filter (full covariance)",
+    "Optimal random-walk Kalman filter over every cell; O(p²) per sample. The reference "
+    "the cheaper filters are judged against (SKF §4.4).",
+    KfConfig,
+    KfState,
+    _UNITS,
+)
+SKF = _spec(
+    "skf",
+    "Simplified Kalman filter",
+    "Kalman update of the active cell only, variances of all cells kept, cross-covariances "
+    "forgotten when a cell leaves; cost independent of table size (SKF §4.7).",
+    SkfConfig,
+    LocalState,
+    _UNITS,
+)
+SSKF = _spec(
+    "sskf",
+    "Steady-state Kalman filter",
+    "Fixed gains from the steady state of the local filter; no covariance, fastest, "
+    "but fragile under poor excitation (SKF §4.5).",
+    SskfConfig,
+    ThetaState,
+    _UNITS,
+)
+RLS = _spec(
+    "rls",
+    "Recursive least squares (local, forgetting)",
+    "RLS with exponential forgetting applied to the active cells only, so unexcited cells "
+    "do not wind up (Peyton Jones & Muske style baseline).",
+    RlsConfig,
+    LocalState,
+    _UNITS,
+)
+NLMS = _spec(
+    "nlms",
+    "Normalised LMS",
+    "Distributes each error over the active cells in proportion to their weights; "
+    "the classic ECU adaptation baseline.",
+    NlmsConfig,
+    ThetaState,
+    _UNITS,
+)
+FILTER_SPECS = (KF, SKF, SSKF, RLS, NLMS)

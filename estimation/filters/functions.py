@@ -21,8 +21,6 @@ from estimation.kernels.gain_only import nlms_kernel, sskf_kernel
 from estimation.kernels.kalman import REJECTED_GATE, REJECTED_MASK, kf_kernel
 from estimation.kernels.local import local_kernel
 
-FILTER_KINDS = ("kf", "skf", "sskf", "rls", "nlms")
-
 RunResult = tuple[FilterState, np.ndarray, np.ndarray]
 
 
@@ -73,7 +71,7 @@ def kf_run(
     accept: np.ndarray,
     settings: FilterSettings,
 ) -> RunResult:
-    """Full KF over a chunk (SKF §4.4, ALGORITHMS.md §2.1; kernel :func:`kf_kernel`)."""
+    """Full KF over a chunk (SKF §4.4, docs/algorithms.md §2.1; kernel :func:`kf_kernel`)."""
     x = np.append(state.theta, state.y_m) if state.y_m is not None else state.theta.copy()
     P = state.P.copy()
     yhat, status = _outputs(y)
@@ -156,7 +154,7 @@ def skf_run(
     accept: np.ndarray,
     settings: FilterSettings,
 ) -> RunResult:
-    """Simplified KF over a chunk (SKF §4.7 Algorithm 1, ALGORITHMS.md §2.2)."""
+    """Simplified KF over a chunk (SKF §4.7 Algorithm 1, docs/algorithms.md §2.2)."""
     return _local_run(state, idx, w, y, accept, settings, rls=False)
 
 
@@ -168,7 +166,7 @@ def rls_run(
     accept: np.ndarray,
     settings: FilterSettings,
 ) -> RunResult:
-    """Local RLS with forgetting λ on the active cells over a chunk (ALGORITHMS.md §2.4)."""
+    """Local RLS with forgetting λ on the active cells over a chunk (docs/algorithms.md §2.4)."""
     return _local_run(state, idx, w, y, accept, settings, rls=True)
 
 
@@ -180,7 +178,7 @@ def sskf_run(
     accept: np.ndarray,
     settings: FilterSettings,
 ) -> RunResult:
-    """Steady-state KF over a chunk (SKF §4.5 (15)–(16), ALGORITHMS.md §2.3)."""
+    """Steady-state KF over a chunk (SKF §4.5 (15)–(16), docs/algorithms.md §2.3)."""
     theta = state.theta.copy()
     yhat, status = _outputs(y)
     sskf_kernel(
@@ -207,7 +205,7 @@ def nlms_run(
     accept: np.ndarray,
     settings: FilterSettings,
 ) -> RunResult:
-    """Normalised LMS over a chunk (ALGORITHMS.md §2.4)."""
+    """Normalised LMS over a chunk (docs/algorithms.md §2.4)."""
     theta = state.theta.copy()
     yhat, status = _outputs(y)
     nlms_kernel(
@@ -234,6 +232,7 @@ RUN_FUNCTIONS: dict[str, Callable[..., RunResult]] = {
     "rls": rls_run,
     "nlms": nlms_run,
 }
+FILTER_KINDS = tuple(RUN_FUNCTIONS)  # the registry's map filters (checked by the tests)
 
 
 def run_chunk(

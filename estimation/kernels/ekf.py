@@ -1,4 +1,4 @@
-"""Joint state and map EKF on the 3-state air path (ALGORITHMS.md §4; EKF §2–5): kernels.
+"""Joint state and map EKF on the 3-state air path (docs/algorithms.md §4; EKF §2–5): kernels.
 
 The model is the simulator's own air path (W&E (2011), LPV (1)–(2)) restricted to the three
 states the EKF estimates, ``x = [p_im, p_em, ω_t]`` (Pa, Pa, rad/s), driven by the measured
@@ -357,7 +357,7 @@ def settle(x: np.ndarray, mem: np.ndarray, u: np.ndarray, seconds: float, prm: n
 
 @nb.njit(cache=True)
 def map_value(theta: np.ndarray, g: np.ndarray, w: float) -> tuple[float, float, int, float]:
-    """``q(w, θ)`` interpolated linearly over ``g`` (clamped, ALGORITHMS.md §1), its slope
+    """``q(w, θ)`` interpolated linearly over ``g`` (clamped, docs/algorithms.md §1), its slope
     ``∂q/∂w`` (0 outside the grid), the cell ``i`` and weight ``η``."""
     cell, eta = _locate(g, w)
     t0 = theta[cell]
@@ -485,7 +485,7 @@ def ekf_kernel(
        ``n_sub = ⌈Δt / max_step_s⌉``, ``P ← F P Fᵀ + blockdiag(Qd, diag(q_rate[3:]) Δt)``
        with ``F = blockdiag(Φ, I)`` (parameters are random walks, EKF (4b)); with ``limit``, every
        parameter variance ``P_ii > P0_ii`` is capped PSD-preservingly (EKF §3.1,
-       ALGORITHMS.md §2.5);
+       docs/algorithms.md §2.5);
     2. the prior outputs ``ŷ_j`` (all four) go to ``yhat_out``;
     3. unless ``accept[k]`` is false, for each used output ``j`` in order: ``ŷ_j = h_j(x)``,
        ``H_j`` (:func:`measurement`), ``e = Y[k, j] − ŷ_j``, ``v = P H_jᵀ``,

@@ -13,7 +13,7 @@ from estimation.kernels.kalman import ACCEPTED, REJECTED_GATE, REJECTED_MASK
 @nb.njit(cache=True, inline="always")
 def sskf_gain_1d(eta: float, r: float) -> float:
     """Steady-state gain of the element with weight ``1−η`` (SKF (16), as restated in
-    ALGORITHMS.md §2.3): ``c = 1 − 2η + 2η²``, ``s = sqrt(1 + 4r/c)``,
+    docs/algorithms.md §2.3): ``c = 1 − 2η + 2η²``, ``s = sqrt(1 + 4r/c)``,
     ``k = 0.5(1−η)(1+s) / (0.5(1+s)c + r)`` with ``r = σv²/σw²``."""
     c = 1.0 - 2.0 * eta + 2.0 * eta * eta
     s = np.sqrt(1.0 + 4.0 * r / c)
@@ -100,7 +100,7 @@ def nlms_kernel(
     yhat_out: np.ndarray,
     status_out: np.ndarray,
 ) -> None:
-    """Normalised LMS (ALGORITHMS.md §2.4): ``θ_c += μ q_c e / (qᵀq + ε)`` for each unlocked
+    """Normalised LMS (docs/algorithms.md §2.4): ``θ_c += μ q_c e / (qᵀq + ε)`` for each unlocked
     active cell ("distribute the error over the active cells"). ``qᵀq`` sums over every active
     cell, locked ones included, so a lone unlocked corner with a tiny weight takes a share of
     the error, not all of it divided by its weight. The innovation gate uses ``s = σv²``."""

@@ -1,4 +1,4 @@
-"""Full Kalman filter over a look-up table (ALGORITHMS.md §2.1, §2.5, §2.6; SKF §4.4).
+"""Full Kalman filter over a look-up table (docs/algorithms.md §2.1, §2.5, §2.6; SKF §4.4).
 
 State ``x`` is ``θ`` (length p) or, with sensor dynamics, the wide state ``[θ; y_M]``
 (length p+1, SKF (26)–(28)); ``P`` is the matching dense covariance. The regressor is sparse
@@ -16,7 +16,7 @@ REJECTED_GATE = 2
 
 @nb.njit(cache=True, inline="always")
 def _cap_row_col(P: np.ndarray, i: int, cap: float) -> None:
-    """PSD-preserving covariance limit (ALGORITHMS.md §2.5): scale row and column ``i`` by
+    """PSD-preserving covariance limit (docs/algorithms.md §2.5): scale row and column ``i`` by
     ``sqrt(cap / P_ii)`` so ``P_ii = cap`` exactly and ``P`` stays PSD (``D P D`` form)."""
     f = np.sqrt(cap / P[i, i])
     m = P.shape[0]

@@ -1,12 +1,12 @@
 """Local (active-cell) covariance filters: the simplified Kalman filter and local RLS.
 
-SKF (ALGORITHMS.md §2.2, SKF §4.7 Algorithm 1): a variance per cell ``var`` (length p) plus a
+SKF (docs/algorithms.md §2.2, SKF §4.7 Algorithm 1): a variance per cell ``var`` (length p) plus a
 dense covariance ``Pa`` of the active elements (``2^d``, plus ``y_M`` with sensor dynamics).
 Inactive cells age lazily: ``last[j]`` is the step through which ``var[j]`` has been aged, and
 ``σw²_j·(steps missed)`` is added when ``j`` becomes active again, so a step costs O(4^d),
 independent of the table size ``p``.
 
-Local RLS (ALGORITHMS.md §2.4) is the same bookkeeping with no process noise, unit
+Local RLS (docs/algorithms.md §2.4) is the same bookkeeping with no process noise, unit
 measurement variance and exponential forgetting ``Pa ← Pa/λ`` on the active block only, so
 cells that are not excited do not wind up.
 """

@@ -1,4 +1,4 @@
-"""LPV adaptive observer of a MAF-sensor error map (LPV (26), (36); ALGORITHMS.md §3).
+"""LPV adaptive observer of a MAF-sensor error map (LPV (26), (36); docs/algorithms.md §3).
 
 The continuous observer, in the scaled coordinates of :mod:`estimation.observers.lmi`
 (``x = S_x x̃``, ``y = S_y ỹ``, ``θ = S_y[2] θ̃``), restricted to the ``m = 2^d`` active

@@ -1,4 +1,4 @@
-"""Multilinear interpolation regressor ψ(u) in sparse form (ALGORITHMS.md §1)."""
+"""Multilinear interpolation regressor ψ(u) in sparse form (docs/algorithms.md §1)."""
 
 import numba as nb
 import numpy as np

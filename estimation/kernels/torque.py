@@ -2,7 +2,7 @@
 the two adaptive parameter laws.
 
 Source: Na, Chen, Herrmann, Burke, Brace, *Vehicle engine torque estimation via unknown input
-observer and adaptive parameter estimation*, IEEE TVT 2018 ("TQ"); ALGORITHMS.md §5. The
+observer and adaptive parameter estimation*, IEEE TVT 2018 ("TQ"); docs/algorithms.md §5. The
 public API is :mod:`estimation.torque`; these kernels only integrate. Each takes whole input
 arrays of one chunk, advances its state arrays in place and writes one value per sample into
 its ``out`` arrays; no validation, no allocation in the loop.

@@ -1,6 +1,6 @@
-"""Gearbox and driver kernel of the backward vehicle model (ALGORITHMS.md §6).
+"""Gearbox and driver kernel of the backward vehicle model (docs/algorithms.md §6).
 
-The rules, units and validation are in :mod:`estimation.vehicle`; this module only loops.
+The rules, units and validation are in :mod:`estimation.plants.vehicle`; this module only loops.
 """
 
 import numba as nb
@@ -41,7 +41,7 @@ def gearbox_kernel(
     out_speed_rpm: np.ndarray,
 ) -> None:
     """Sequential gear choice and slew-limited engine speed (rules in
-    :mod:`estimation.vehicle`, step 3).
+    :mod:`estimation.plants.vehicle`, step 3).
 
     Writes ``out_gear[k]`` (0 = neutral) and ``out_speed_rpm[k]``.
     """

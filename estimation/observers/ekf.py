@@ -1,4 +1,4 @@
-"""Joint state and MAF-map EKF on the 3-state diesel air path (ALGORITHMS.md §4; EKF §2–5).
+"""Joint state and MAF-map EKF on the 3-state diesel air path (docs/algorithms.md §4; EKF §2–5).
 
 Höckerdal, Frisk & Eriksson (2009), "EKF-based adaptation of look-up tables with an air
 mass-flow sensor application" — the EKF paper. The model is the simulator's own air path
@@ -24,7 +24,8 @@ update and the PSD-preserving covariance limiting are in :mod:`estimation.kernel
 The ``w_c_kg_s`` output of every snapshot is ``W_c(x̂)``, the estimate of the *true*
 compressor flow, on which Def, Aug and Map compare (EKF Table 1); ``p_im_pa``, ``p_em_pa``,
 ``omega_t_rad_s`` are the state estimates (Table 1's other rows). Counts of gated and
-damped updates per output and of state clamps are in each snapshot's ``metrics``.
+damped updates per output and of state clamps are in each snapshot's ``metrics``. The settings
+of each variant are in :mod:`estimation.observers.ekf_config`.
 
 Defaults (``maf-1d-whtc``, seeds 0–2, whole WHTC): RMS error of ``W_c`` ≈ 0.45 g/s (Def),
 0.10 g/s (Aug and Map) against a MAF error of 1.8 g/s RMS; Map's ``q`` is within
@@ -45,29 +46,29 @@ Example
 from __future__ import annotations
 
 import dataclasses
-import json
-from collections.abc import Iterator
 from dataclasses import dataclass
-from pathlib import Path
-from typing import Any, ClassVar, Literal, Self
+from typing import Any, ClassVar
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from estimation.errors import ConfigError, ShapeError, StateError
-from estimation.estimator import EstimatorSpec, Snapshot
+from estimation.estimator import Chunk, ChunkedEstimator
 from estimation.kernels import ekf as kern
+from estimation.observers.ekf_config import (
+    OUTPUT_NAMES,
+    EkfAugConfig,
+    EkfConfig,
+    EkfDefConfig,
+    EkfMapConfig,
+)
 from estimation.plants.airpath_params import AirpathParams
+from estimation.registry import EstimatorKind, family
 from estimation.signals import Signals
+from estimation.state import EstimatorState
 from estimation.table import Axis, Table
 
 __all__ = [
     "EKF_SPECS",
-    "EkfAugConfig",
-    "EkfChannels",
-    "EkfConfig",
-    "EkfDefConfig",
-    "EkfMapConfig",
     "EkfModel",
     "EkfObserver",
     "EkfSettings",
@@ -80,152 +81,10 @@ __all__ = [
 
 VARIANTS = ("ekf-def", "ekf-aug", "ekf-map")
 _MODES = {"ekf-def": kern.MODE_DEF, "ekf-aug": kern.MODE_AUG, "ekf-map": kern.MODE_MAP}
-OUTPUT_NAMES = ("maf", "p_im", "p_em", "omega_t")  # in kernel column order (Y_*)
-Output = Literal["maf", "p_im", "p_em", "omega_t"]
-
-DEFAULT_MAF_AXIS = [round(0.02 * i, 2) for i in range(11)]  # the EKF-style grid, kg/s
-
-
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-Triple = tuple[float, float, float]
-
-
-class EkfChannels(_Strict):
-    """Names of the measured channels the observer reads."""
-
-    u_egr: str = Field("u_egr_pos_pct", description="EGR valve position ũ_egr [%].")
-    u_vgt: str = Field("u_vgt_pos_pct", description="VGT position ũ_vgt [%].")
-    fuel: str = Field("fuel_mg_per_cycle", description="Injected fuel u_δ [mg/cycle].")
-    speed: str = Field("speed_rpm", description="Engine speed n_e [rpm].")
-    maf: str = Field("maf_kg_s", description="MAF sensor reading W_c,meas [kg/s].")
-    p_im: str = Field("p_im_pa", description="Intake manifold pressure sensor [Pa].")
-    p_em: str = Field("p_em_pa", description="Exhaust manifold pressure sensor [Pa].")
-    omega_t: str = Field("omega_t_rad_s", description="Turbo speed sensor [rad/s].")
-
-    def inputs(self) -> list[str]:
-        """Input channels in the kernel's ``U_*`` column order."""
-        return [self.u_egr, self.u_vgt, self.fuel, self.speed]
-
-    def output(self, name: str) -> str:
-        return str(getattr(self, name))
-
-
-class EkfConfig(_Strict):
-    """Settings shared by the three EKF variants (standard deviations, SI units).
-
-    Measurement noise of the MAF: ``R = sigma_maf_abs² + (sigma_maf_rel · y)²``; of the other
-    sensors ``sigma_p_im²``, ``sigma_p_em²``, ``(sigma_omega_t_rel · y)²`` — the defaults
-    match the simulator's :class:`~estimation.plants.airpath.NoiseSpec`. Process noise is
-    white with intensity ``σ²`` per second: a parameter receives ``σ² Δt`` over a sample
-    period ``Δt``; for the states it is integrated along the model's dynamics
-    (``∫ Φ(s) diag(σ²) Φ(s)ᵀ ds``), so the stiff ``p_im`` holds about ``σ²/(2|λ|)``.
-    """
-
-    channels: EkfChannels = Field(default_factory=EkfChannels)
-    outputs: list[Output] = Field(
-        default_factory=lambda: ["maf"],
-        min_length=1,
-        description="Measured outputs fed back (EKF §5.2 simulation study: the MAF only).",
-    )
-    sigma_maf_rel: float = Field(0.01, ge=0.0, description="Relative σ of the MAF reading.")
-    sigma_maf_abs: float = Field(2e-4, gt=0.0, description="Absolute σ of the MAF [kg/s].")
-    sigma_p_im: float = Field(1000.0, gt=0.0, description="σ of the p_im sensor [Pa].")
-    sigma_p_em: float = Field(1000.0, gt=0.0, description="σ of the p_em sensor [Pa].")
-    sigma_omega_t_rel: float = Field(0.005, gt=0.0, description="Relative σ of the ω_t sensor.")
-    sigma_state: Triple = Field(
-        (500.0, 1000.0, 20.0),
-        description="Process noise intensity σ of (p_im Pa, p_em Pa, ω_t rad/s) per √s.",
-    )
-    sigma0_state: Triple = Field(
-        (2e4, 3e4, 2000.0), description="Initial σ of (p_im Pa, p_em Pa, ω_t rad/s)."
-    )
-    x0: Triple | None = Field(
-        None,
-        description="Initial (p_im Pa, p_em Pa, ω_t rad/s); default: the model settled for "
-        "settle_s at the first sample's inputs.",
-    )
-    settle_s: float = Field(30.0, gt=0.0, le=600.0, description="Settling time of x0 [s].")
-    max_step_s: float = Field(
-        0.005,
-        gt=0.0,
-        le=1.0,
-        description="Longest exponential-Euler step of the prediction [s].",
-    )
-    gate_sigma: float | None = Field(
-        5.0,
-        gt=0.0,
-        description="Innovation gate: an output with e²/s > gate_sigma² is not used (χ², "
-        "1 dof; null: no gate).",
-    )
-    limit: Literal["none", "p0"] = Field(
-        "p0", description="Cap parameter variances at P0, PSD-preserving (EKF §3.1)."
-    )
-
-    @field_validator("sigma_state", "sigma0_state")
-    @classmethod
-    def _non_negative(cls, v: Triple) -> Triple:
-        if any(not np.isfinite(a) or a < 0 for a in v):
-            raise ValueError(f"must be finite and ≥ 0, got {list(v)}")
-        return v
-
-    @field_validator("x0")
-    @classmethod
-    def _positive(cls, v: Triple | None) -> Triple | None:
-        if v is not None and any(not np.isfinite(a) or a <= 0 for a in v):
-            raise ValueError(f"must be finite and > 0, got {list(v)}")
-        return v
-
-    @field_validator("outputs")
-    @classmethod
-    def _unique(cls, v: list[str]) -> list[str]:
-        if len(set(v)) != len(v):
-            raise ValueError(f"names an output twice: {v}")
-        return v
-
-
-class EkfDefConfig(EkfConfig):
-    """Def: the default model, no MAF correction (EKF §5.1)."""
-
-
-class EkfAugConfig(EkfConfig):
-    """Aug: one random-walk bias ``b`` [kg/s] added to the MAF output (EKF §5.1)."""
-
-    sigma_bias: float = Field(
-        2e-3, ge=0.0, description="Random-walk σ of b per √s [kg/s] (as fast as the system)."
-    )
-    sigma0_bias: float = Field(0.01, gt=0.0, description="Initial σ of b (also its cap) [kg/s].")
-
-
-class EkfMapConfig(EkfConfig):
-    """Map: 1-D relative correction map ``q(W, θ)`` on the MAF (EKF §5.1, (6))."""
-
-    breakpoints: list[float] = Field(
-        default_factory=lambda: list(DEFAULT_MAF_AXIS),
-        min_length=2,
-        description="Strictly increasing breakpoints of q over W [kg/s].",
-    )
-    theta0: float = Field(0.0, gt=-1.0, description="Initial map value q [-].")
-    sigma_theta: float = Field(
-        2e-3, ge=0.0, description="Random-walk σ of each grid value per √s [-] (slow: aging)."
-    )
-    sigma0_theta: float = Field(
-        0.1, gt=0.0, description="Initial σ of each grid value (also its cap) [-]."
-    )
-
-    @field_validator("breakpoints")
-    @classmethod
-    def _increasing(cls, g: list[float]) -> list[float]:
-        for i in range(len(g) - 1):
-            if not g[i] < g[i + 1]:
-                raise ValueError(f"must be strictly increasing; {g[i]:g} then {g[i + 1]:g}")
-        return g
 
 
 @dataclass(frozen=True, slots=True, eq=False)
-class EkfState:
+class EkfState(EstimatorState):
     """Frozen, serialisable EKF state after ``step`` log samples.
 
     ``x`` (m,) = ``[p_im, p_em, ω_t]`` + ``[b]`` (Aug) or + ``θ`` (Map) and ``P`` (m, m) are
@@ -235,8 +94,6 @@ class EkfState:
     samples masked / with a gated output.
     """
 
-    kind: str
-    step: int
     rejected_mask: int
     rejected_gate: int
     counts: np.ndarray
@@ -245,51 +102,6 @@ class EkfState:
     mem: np.ndarray
 
     ARRAYS: ClassVar[tuple[str, ...]] = ("counts", "x", "P", "mem")
-
-    def copy(self) -> Self:
-        return dataclasses.replace(
-            self, **{name: np.array(getattr(self, name)) for name in self.ARRAYS}
-        )
-
-    def to_dict(self) -> dict[str, Any]:
-        out: dict[str, Any] = {"state_class": type(self).__name__}
-        for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            if isinstance(value, np.ndarray):
-                out[f.name] = {
-                    "dtype": str(value.dtype),
-                    "shape": list(value.shape),
-                    "data": value.ravel().tolist(),
-                }
-            else:
-                out[f.name] = value
-        return out
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> EkfState:
-        if data.get("state_class") != cls.__name__:
-            raise StateError(f"not a saved {cls.__name__}: {data.get('state_class')!r}")
-        values: dict[str, Any] = {}
-        for f in dataclasses.fields(cls):
-            if f.name not in data:
-                raise StateError(f"{cls.__name__}: saved state lacks {f.name!r}")
-            raw = data[f.name]
-            if f.name in cls.ARRAYS:
-                try:
-                    dtype = {"int64": np.int64, "float64": np.float64}[raw["dtype"]]
-                    values[f.name] = np.array(raw["data"], dtype=dtype).reshape(raw["shape"])
-                except (KeyError, TypeError, ValueError) as exc:
-                    raise StateError(f"{cls.__name__}: bad array {f.name!r}: {exc}") from exc
-            else:
-                values[f.name] = raw
-        return cls(**values)
-
-    def save(self, path: str | Path) -> None:
-        Path(path).write_text(json.dumps(self.to_dict()))
-
-    @classmethod
-    def load(cls, path: str | Path) -> EkfState:
-        return cls.from_dict(json.loads(Path(path).read_text()))
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -487,8 +299,12 @@ def ekf_run(
     return new, outputs, status
 
 
-class EkfObserver:
-    """One EKF variant behind the :class:`~estimation.estimator.Estimator` interface."""
+class EkfObserver(ChunkedEstimator[EkfState, EkfModel]):
+    """One EKF variant behind the :class:`~estimation.estimator.Estimator` interface;
+    ``run``, ``fit`` and the state check are :class:`~estimation.estimator.ChunkedEstimator`'s
+    (``state`` from a snapshot or :meth:`EkfState.load` resumes bit-identically)."""
+
+    state_class = EkfState
 
     def __init__(self, name: str, config: EkfConfig, params: AirpathParams | None = None) -> None:
         if name not in _MODES:
@@ -502,45 +318,33 @@ class EkfObserver:
         ch = self.config.channels
         return ch.inputs() + [ch.output(o) for o in self.config.outputs]
 
+    def signal_roles(self) -> dict[str, list[str]]:
+        ch = self.config.channels
+        return {
+            "axis": [ch.maf] if self.settings.mode == kern.MODE_MAP else [],
+            "output": [ch.output(o) for o in self.config.outputs],
+            "input": ch.inputs(),
+        }
+
+    def output_names(self) -> tuple[str, ...]:
+        return tuple(output_units(self.name))
+
     def prepare(self, signals: Signals, accept: np.ndarray | None = None) -> EkfModel:
         return prepare_model(signals, self.config, accept=accept)
 
     def initial_state(self, model: EkfModel) -> EkfState:
         return initial_state(self.name, model, self.settings, self.config)
 
-    def run(
-        self,
-        signals: Signals,
-        *,
-        every: int | None = None,
-        state: EkfState | None = None,
-        accept: np.ndarray | None = None,
-    ) -> Iterator[Snapshot]:
-        """Filter the log in chunks of ``every`` samples, yielding a snapshot after each;
-        ``state`` (from a snapshot or :meth:`EkfState.load`) resumes bit-identically."""
-        model = self.prepare(signals, accept)
-        n = model.U.shape[0]
-        if state is None:
-            state = self.initial_state(model)
-        self._check_state(state, n)
-        chunk = n if every is None else int(every)
-        if chunk < 1:
-            raise ConfigError(f"every must be >= 1 sample, got {every}")
-        if state.step == n:
-            yield self._snapshot(state, model, state.step, {}, np.empty(0, np.int8))
-            return
-        while state.step < n:
-            start = state.step
-            state, outputs, status = ekf_run(state, model, self.settings, min(start + chunk, n))
-            yield self._snapshot(state, model, start, outputs, status)
+    def steps(self, prepared: EkfModel) -> int:
+        return int(prepared.U.shape[0])
 
-    def fit(self, signals: Signals, *, accept: np.ndarray | None = None) -> Snapshot:
-        """Run over the whole log in one chunk and return the final snapshot."""
-        last = None
-        for last in self.run(signals, accept=accept):  # noqa: B007
-            pass
-        assert last is not None
-        return last
+    def start(self, signals: Signals, prepared: EkfModel) -> EkfState:
+        return self.initial_state(prepared)
+
+    def advance(
+        self, state: EkfState, prepared: EkfModel, stop: int
+    ) -> tuple[EkfState, dict[str, np.ndarray], np.ndarray]:
+        return ekf_run(state, prepared, self.settings, stop)
 
     def map_table(self, state: EkfState) -> Table | None:
         """The correction map ``q`` over ``W`` [kg/s] (Map only)."""
@@ -549,50 +353,31 @@ class EkfObserver:
         axis = Axis(self.config.channels.maf, "kg/s", self.settings.g)
         return Table([axis], state.x[kern.N_X :].copy())
 
-    def _check_state(self, state: EkfState, n: int) -> None:
-        if not isinstance(state, EkfState):
-            raise StateError(f"{self.name} resumes from an EkfState, got {type(state).__name__}")
-        if state.kind != self.name:
-            raise StateError(f"state of {state.kind!r} cannot resume {self.name!r}")
+    def check_fit(self, state: EkfState) -> None:
         m = self.settings.q_rate.size
         if state.x.shape != (m,) or state.P.shape != (m, m):
             raise StateError(f"state has x {state.x.shape}, P {state.P.shape}; expected m = {m}")
         if state.mem.shape != (2,) or state.counts.shape != (kern.N_COUNTS,):
             raise StateError(f"state has mem {state.mem.shape}, counts {state.counts.shape}")
-        if not 0 <= state.step <= n:
-            raise StateError(f"state is at sample {state.step}, the log has {n}")
 
-    def _snapshot(
-        self,
-        state: EkfState,
-        model: EkfModel,
-        start: int,
-        outputs: dict[str, np.ndarray],
-        status: np.ndarray,
-    ) -> Snapshot:
-        sample = state.step
+    def times(self, prepared: EkfModel) -> np.ndarray:
+        return prepared.time_s
+
+    def report(self, state: EkfState, prepared: EkfModel, chunk: Chunk) -> dict[str, Any]:
         table = self.map_table(state)
-        variance = None if table is None else np.diag(state.P)[kern.N_X :].copy()
         diagnostics: dict[str, float] = {}
         for o in self.config.outputs:
             j = OUTPUT_NAMES.index(o)
             diagnostics[f"gated_{o}"] = float(state.counts[kern.C_GATE + j])
             diagnostics[f"damped_{o}"] = float(state.counts[kern.C_DAMPED + j])
         diagnostics["state_clamps"] = float(state.counts[kern.C_CLAMP])
-        return Snapshot(
-            estimator=self.name,
-            sample=sample,
-            n_samples=model.U.shape[0],
-            time_s=float(model.time_s[max(sample - 1, 0)]),
-            state=state,
-            chunk_start=start,
-            table=table,
-            variance=variance,
-            outputs=outputs,
-            status=status,
-            rejected={"mask": state.rejected_mask, "innovation": state.rejected_gate},
-            metrics=diagnostics,
-        )
+        return {
+            "table": table,
+            "variance": None if table is None else np.diag(state.P)[kern.N_X :].copy(),
+            "outputs": chunk.outputs,
+            "rejected": {"mask": state.rejected_mask, "innovation": state.rejected_gate},
+            "metrics": diagnostics,
+        }
 
 
 _PAPER = (
@@ -601,46 +386,51 @@ _PAPER = (
 )
 
 
-def _spec(
-    name: str, title: str, description: str, model: type[EkfConfig], produces_map: bool
-) -> EstimatorSpec:
-    def factory(config: BaseModel) -> EkfObserver:
-        assert isinstance(config, EkfConfig)
-        return EkfObserver(name, config)
-
-    return EstimatorSpec(
-        name=name,
-        title=title,
-        description=description,
-        paper=_PAPER,
-        config_model=model,
-        factory=factory,
-        produces_map=produces_map,
-    )
+_BASE_UNITS = {
+    "w_c_kg_s": "kg/s",
+    "p_im_pa": "Pa",
+    "p_em_pa": "Pa",
+    "omega_t_rad_s": "rad/s",
+    "maf_prediction": "kg/s",
+    "residual": "kg/s",  # of the MAF reading
+}
+_EXTRA_UNITS = {"ekf-def": {}, "ekf-aug": {"maf_bias_kg_s": "kg/s"}, "ekf-map": {"maf_q": ""}}
 
 
-EKF_SPECS = (
-    _spec(
-        "ekf-def",
-        "EKF, default model",
-        "Air-path EKF (p_im, p_em, ω_t) on the W&E model fed back by the MAF; the MAF error "
-        "is not modelled (EKF §5.1 Def).",
-        EkfDefConfig,
-        False,
-    ),
-    _spec(
-        "ekf-aug",
-        "EKF with a MAF bias state",
-        "The air-path EKF plus one random-walk bias on the MAF output (EKF §5.1 Aug).",
-        EkfAugConfig,
-        False,
-    ),
-    _spec(
-        "ekf-map",
-        "EKF with a MAF correction map",
-        "The air-path EKF plus a 1-D relative correction map q(W) on the MAF, its grid values "
-        "as random-walk states, covariance-limited at P0 (EKF §5.1 Map).",
-        EkfMapConfig,
-        True,
-    ),
+def output_units(name: str) -> dict[str, str]:
+    """The per-sample series of variant ``name`` and their units (``maf_q`` is relative)."""
+    return _BASE_UNITS | _EXTRA_UNITS[name]
+
+
+_spec = family(
+    EkfObserver, EkfConfig, kind=EstimatorKind.JOINT_EKF, paper=_PAPER, produces_map=False
 )
+
+EKF_DEF = _spec(
+    "ekf-def",
+    "EKF, default model",
+    "Air-path EKF (p_im, p_em, ω_t) on the W&E model fed back by the MAF; the MAF error "
+    "is not modelled (EKF §5.1 Def).",
+    EkfDefConfig,
+    EkfState,
+    output_units("ekf-def"),
+)
+EKF_AUG = _spec(
+    "ekf-aug",
+    "EKF with a MAF bias state",
+    "The air-path EKF plus one random-walk bias on the MAF output (EKF §5.1 Aug).",
+    EkfAugConfig,
+    EkfState,
+    output_units("ekf-aug"),
+)
+EKF_MAP = _spec(
+    "ekf-map",
+    "EKF with a MAF correction map",
+    "The air-path EKF plus a 1-D relative correction map q(W) on the MAF, its grid values "
+    "as random-walk states, covariance-limited at P0 (EKF §5.1 Map).",
+    EkfMapConfig,
+    EkfState,
+    output_units("ekf-map"),
+    produces_map=True,
+)
+EKF_SPECS = (EKF_DEF, EKF_AUG, EKF_MAP)

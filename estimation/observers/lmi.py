@@ -2,7 +2,7 @@
 
 The air-path model of LPV (3)–(5), ``ẋ = A(ρ)x + E``, ``y_m = C(ρ)x + Gψᵀθ``, is affine in
 ρ, so the observer inequality holds on the whole ρ-box if it holds at its 2⁵ = 32 vertices
-(ALGORITHMS.md §3). Find ``P = Pᵀ ≻ 0``, ``Q = Qᵀ ≻ 0`` and ``Y`` such that, at every vertex,
+(docs/algorithms.md §3). Find ``P = Pᵀ ≻ 0``, ``Q = Qᵀ ≻ 0`` and ``Y`` such that, at every vertex,
 
     M(ρ) = [[AᵀP + PA − CᵀYᵀ − YC + Q,  YG,     C2ᵀ ],
             [GᵀYᵀ,                      −ε1 I,  0   ],

@@ -4,8 +4,7 @@ Zhang, Yang et al. (2015), Sensors — "the LPV paper": observer (26) with gain 
 vertex LMIs (28)/(35) (:mod:`estimation.observers.lmi`), adaptive law ``θ̂' = Γψ(y_m2 −
 C2x̂ − ψᵀθ̂)`` on the active elements only (36); kernel and discretisation in
 :mod:`estimation.kernels.lpv`. Unvisited cells are filled by the quadratic surface of
-LPV (37) or by a smooth convex least-squares fill (:func:`fill_quadratic`,
-:func:`fill_smooth`).
+LPV (37) or by a smooth convex least-squares fill (:mod:`estimation.observers.lpv_fill`).
 
 Three choices differ from a literal reading of the paper, each because the paper's
 simulation is noise-free and continuous while our data are sampled, noisy logs:
@@ -23,7 +22,7 @@ simulation is noise-free and continuous while our data are sampled, noisy logs:
   the ``p_im`` and MAF residuals are not fed into ``ω̂_t``, whose product ``ρ1 ω̂_t`` is the
   model flow the map is measured against;
 - ``ρ1`` comes from the intake-manifold balance (channel ``rho1``,
-  :func:`estimation.plants.airpath.rho_from_measurements`), which is well conditioned; the
+  :func:`estimation.plants.airpath_rho.rho_from_measurements`), which is well conditioned; the
   compressor-map value of LPV (3) (``rho1="rho1_compressor"``) is biased by several g/s
   under 1 kPa pressure noise.
 
@@ -35,18 +34,15 @@ difference); ``"zero"`` sets ``E3 = 0`` and leaves it to the ω_t output injecti
 
 from __future__ import annotations
 
-import ast
 import dataclasses
-from collections.abc import Iterator
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, ClassVar, Literal, Self
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from estimation.errors import ConfigError, ShapeError, StateError
-from estimation.estimator import EstimatorSpec, Snapshot
+from estimation.errors import ConfigError, ShapeError
+from estimation.estimator import Chunk, ChunkedEstimator
 from estimation.filters.config import AxisConfig
 from estimation.kernels.lpv import CONSTANT, NORMALISED, lpv_observer_kernel
 from estimation.observers.lmi import (
@@ -55,13 +51,23 @@ from estimation.observers.lmi import (
     GainDesign,
     synthesize_gain,
 )
+from estimation.registry import EstimatorKind, EstimatorSpec
 from estimation.signals import Signals
+from estimation.state import EstimatorState
 from estimation.table import Axis, Grid, Table
 
 FUEL_AXIS_MG = [float(v) for v in np.arange(0.0, 56.0 + 1e-9, 4.0)]
 SPEED_AXIS_RPM = [float(v) for v in np.arange(0.0, 3000.0 + 1e-9, 250.0)]
 RHO_CHANNELS = ("rho1", "rho2", "rho3", "rho4", "rho5")
 _MODES = {"constant": CONSTANT, "normalised": NORMALISED}
+OUTPUT_UNITS = {
+    "p_im_pa": "Pa",
+    "p_em_pa": "Pa",
+    "omega_t_rad_s": "rad/s",
+    "w_c_kg_s": "kg/s",
+    "maf_error_kg_s": "kg/s",
+    "residual": "kg/s",  # of the MAF reading
+}
 
 
 def _default_axes() -> list[AxisConfig]:
@@ -146,7 +152,7 @@ class LpvConfig(BaseModel):
 
 
 @dataclass(frozen=True, slots=True, eq=False)
-class LpvState:
+class LpvState(EstimatorState):
     """Observer state: step, x̂ (3,) [Pa, Pa, rad/s], θ̂ (p,) [kg/s], the accumulated ψ
     weights (visits) and excitation ``S_j = ∫ψ_j² dt`` [s] (the normalised gain) of every
     element, and the design it runs.
@@ -155,8 +161,6 @@ class LpvState:
     of the interrupted one.
     """
 
-    kind: str
-    step: int
     a1: float
     a2: float
     x_hat: np.ndarray
@@ -180,57 +184,7 @@ class LpvState:
         "rho_lo",
         "rho_hi",
     )
-
-    def copy(self) -> LpvState:
-        return dataclasses.replace(
-            self, **{name: np.array(getattr(self, name)) for name in self.ARRAYS}
-        )
-
-    def to_dict(self) -> dict[str, Any]:
-        out: dict[str, Any] = {"state_class": "LpvState"}
-        for f in dataclasses.fields(self):
-            v = getattr(self, f.name)
-            if isinstance(v, np.ndarray):
-                out[f.name] = {
-                    "dtype": str(v.dtype),
-                    "shape": list(v.shape),
-                    "data": v.ravel().tolist(),
-                }
-            else:
-                out[f.name] = v
-        return out
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> LpvState:
-        if data.get("state_class", "LpvState") != "LpvState":
-            raise StateError(f"not an LPV observer state: {data.get('state_class')!r}")
-        values: dict[str, Any] = {}
-        for f in dataclasses.fields(cls):
-            if f.name not in data:
-                raise StateError(f"LpvState: saved state lacks {f.name!r}")
-            raw = data[f.name]
-            if f.name in cls.ARRAYS:
-                try:
-                    values[f.name] = np.array(raw["data"], dtype=np.float64).reshape(raw["shape"])
-                except (KeyError, TypeError, ValueError) as exc:
-                    raise StateError(f"LpvState: bad array {f.name!r}: {exc}") from exc
-            else:
-                values[f.name] = raw
-        return cls(**values)
-
-    def save(self, path: str | Path) -> None:
-        scalars = {"kind": self.kind, "step": self.step, "a1": self.a1, "a2": self.a2}
-        arrays = {name: getattr(self, name) for name in self.ARRAYS}
-        np.savez(path, __class__="LpvState", __scalars__=repr(scalars), **arrays)
-
-    @staticmethod
-    def load(path: str | Path) -> LpvState:
-        with np.load(path, allow_pickle=False) as f:
-            if str(f["__class__"]) != "LpvState":
-                raise StateError(f"{path}: not a saved LPV observer state")
-            scalars = ast.literal_eval(str(f["__scalars__"]))
-            arrays = {name: np.array(f[name]) for name in LpvState.ARRAYS}
-        return LpvState(**scalars, **arrays)
+    WHAT: ClassVar[str] = "LPV observer state"
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -256,10 +210,13 @@ def data_rho_box(rho: np.ndarray, *, rho4_floor: float = 0.1) -> tuple[np.ndarra
     return lo, hi
 
 
-class LpvObserver:
-    """LPV adaptive observer (LPV (26)) estimating the MAF error map ``ΔW_c(u_δ, n_e)``."""
+class LpvObserver(ChunkedEstimator[LpvState, LpvPrepared]):
+    """LPV adaptive observer (LPV (26)) estimating the MAF error map ``ΔW_c(u_δ, n_e)``;
+    ``run``, ``fit`` and the state check are :class:`~estimation.estimator.ChunkedEstimator`'s.
+    """
 
     name = "lpv"
+    state_class = LpvState
 
     def __init__(self, config: LpvConfig) -> None:
         self.config = config
@@ -273,6 +230,17 @@ class LpvObserver:
         c = self.config
         names = [a.name for a in c.axes] + [c.p_im, c.omega_t, c.maf, c.fuel_flow]
         return names + self.rho_channels()
+
+    def signal_roles(self) -> dict[str, list[str]]:
+        c = self.config
+        return {
+            "axis": [a.name for a in c.axes],
+            "output": [c.p_im, c.omega_t, c.maf],
+            "input": [c.fuel_flow, *self.rho_channels()],
+        }
+
+    def output_names(self) -> tuple[str, ...]:
+        return tuple(OUTPUT_UNITS)
 
     def rho_channels(self) -> list[str]:
         """The five channels read as ρ1…ρ5."""
@@ -354,83 +322,44 @@ class LpvObserver:
             rho_hi=hi,
         )
 
-    def run(
-        self,
-        signals: Signals,
-        *,
-        every: int | None = None,
-        state: LpvState | None = None,
-        accept: np.ndarray | None = None,
-    ) -> Iterator[Snapshot]:
-        """Observe the whole log in chunks of ``every`` samples, a snapshot after each."""
-        prepared = self.prepare(signals, accept)
-        n = prepared.y.shape[0]
-        if state is None:
-            state = self.initial_state(signals, prepared)
-        if state.kind != self.name:
-            raise StateError(f"state of a {state.kind!r} estimator cannot resume {self.name!r}")
-        if state.theta.size != self.grid.size:
-            raise StateError(f"state has {state.theta.size} cells, the table {self.grid.size}")
-        if not 0 <= state.step <= n:
-            raise StateError(f"state is at step {state.step}, the log has {n} samples")
-        chunk = n if every is None else int(every)
-        if chunk < 1:
-            raise ConfigError(f"every must be >= 1 sample, got {every}")
-        if state.step == n:
-            empty = np.empty((0, 3))
-            yield self._snapshot(state, prepared, n, empty, np.empty(0), np.empty(0))
-            return
-        while state.step < n:
-            start = state.step
-            stop = min(start + chunk, n)
-            state, x_out, wc, dwc = lpv_run(
-                state,
-                prepared,
-                start,
-                stop,
-                gamma=self.config.gamma,
-                adaptation=self.config.adaptation,
-            )
-            yield self._snapshot(state, prepared, start, x_out, wc, dwc)
+    def steps(self, prepared: LpvPrepared) -> int:
+        return int(prepared.y.shape[0])
 
-    def fit(self, signals: Signals, *, accept: np.ndarray | None = None) -> Snapshot:
-        last = None
-        for last in self.run(signals, accept=accept):  # noqa: B007
-            pass
-        assert last is not None
-        return last
+    def start(self, signals: Signals, prepared: LpvPrepared) -> LpvState:
+        return self.initial_state(signals, prepared)
 
-    def _snapshot(
-        self,
-        state: LpvState,
-        prepared: LpvPrepared,
-        start: int,
-        x_out: np.ndarray,
-        wc: np.ndarray,
-        dwc: np.ndarray,
-    ) -> Snapshot:
-        sample = state.step
-        n = prepared.y.shape[0]
-        status = np.where(prepared.accept[start:sample], 0, 1).astype(np.int8)
-        return Snapshot(
-            estimator=self.name,
-            sample=sample,
-            n_samples=n,
-            time_s=float(prepared.time_s[max(sample - 1, 0)]),
-            state=state,
-            chunk_start=start,
-            table=Table(self.grid.axes, state.theta.reshape(self.grid.shape)),
-            outputs={
-                "p_im_pa": x_out[:, 0],
-                "p_em_pa": x_out[:, 1],
-                "omega_t_rad_s": x_out[:, 2],
-                "w_c_kg_s": wc,
-                "maf_error_kg_s": dwc,
-                "residual": prepared.y[start:sample, 2] - wc - dwc,
-            },
-            status=status,
-            rejected={"mask": int(np.count_nonzero(~prepared.accept[:sample]))},
+    def advance(
+        self, state: LpvState, prepared: LpvPrepared, stop: int
+    ) -> tuple[LpvState, dict[str, np.ndarray], np.ndarray]:
+        start = state.step
+        state, x_out, wc, dwc = lpv_run(
+            state,
+            prepared,
+            start,
+            stop,
+            gamma=self.config.gamma,
+            adaptation=self.config.adaptation,
         )
+        outputs = {
+            "p_im_pa": x_out[:, 0],
+            "p_em_pa": x_out[:, 1],
+            "omega_t_rad_s": x_out[:, 2],
+            "w_c_kg_s": wc,
+            "maf_error_kg_s": dwc,
+            "residual": prepared.y[start:stop, 2] - wc - dwc,
+        }
+        status = np.where(prepared.accept[start:stop], 0, 1).astype(np.int8)
+        return state, outputs, status
+
+    def times(self, prepared: LpvPrepared) -> np.ndarray:
+        return prepared.time_s
+
+    def report(self, state: LpvState, prepared: LpvPrepared, chunk: Chunk) -> dict[str, Any]:
+        return {
+            "table": Table(self.grid.axes, state.theta.reshape(self.grid.shape)),
+            "outputs": chunk.outputs,
+            "rejected": {"mask": int(np.count_nonzero(~prepared.accept[: chunk.sample]))},
+        }
 
 
 def lpv_run(
@@ -465,107 +394,21 @@ def lpv_run(
     return dataclasses.replace(out, step=stop), x_out, wc, dwc
 
 
-# --- unvisited region --------------------------------------------------------------------
-
-
-def visited_cells(
-    state_or_weights: LpvState | np.ndarray, *, min_weight: float = 1.0
-) -> np.ndarray:
-    """Boolean (p,) mask of elements whose accumulated ψ weight reaches ``min_weight``."""
-    ws = state_or_weights.weight_sum if isinstance(state_or_weights, LpvState) else state_or_weights
-    return np.asarray(ws) >= min_weight
-
-
-def fill_quadratic(table: Table, visited: np.ndarray) -> tuple[Table, np.ndarray]:
-    """Fill unvisited cells of a 2-D map with LPV (37)'s quadratic surface.
-
-    ``ΔW_c,e = a2u² + a1u + b2n² + b1n + c2·u·n + c1`` is fitted by least squares to the
-    visited nodes (axes normalised to [0, 1]); visited nodes keep their values. Returns the
-    filled table and the (shape) mask of estimated (True) vs filled (False) nodes.
-    """
-    if table.ndim != 2:
-        raise ShapeError(f"the LPV (37) fill is for 2-D maps, got {table.ndim}-D")
-    mask = np.asarray(visited, dtype=bool).reshape(table.shape)
-    if mask.sum() < 6:
-        raise ConfigError(f"the quadratic fill needs >= 6 visited nodes, got {int(mask.sum())}")
-    g0, g1 = (a.breakpoints for a in table.axes)
-    u, v = np.meshgrid(
-        (g0 - g0[0]) / (g0[-1] - g0[0]), (g1 - g1[0]) / (g1[-1] - g1[0]), indexing="ij"
-    )
-    X = np.stack([u * u, u, v * v, v, u * v, np.ones_like(u)], axis=-1)
-    vals = np.asarray(table.values, dtype=np.float64)
-    coef, *_ = np.linalg.lstsq(X[mask], vals[mask], rcond=None)
-    filled = np.where(mask, vals, X @ coef)
-    return table.with_values(filled), mask
-
-
-def fill_smooth(
-    table: Table,
-    visited: np.ndarray,
-    *,
-    smoothness: float = 1.0,
-    lower: float | None = None,
-    upper: float | None = None,
-    increasing: tuple[int, ...] = (),
-    decreasing: tuple[int, ...] = (),
-) -> tuple[Table, np.ndarray]:
-    """Smooth convex fill: ``min Σ_visited (T − θ̂)² + λ Σ (second differences)²``.
-
-    Solved with cvxpy (Clarabel) over all nodes of a 1-D or 2-D map (values scaled by their
-    largest visited magnitude); ``lower``/``upper`` bound every node [table unit];
-    ``increasing``/``decreasing`` list axes along which the whole map must be monotone
-    (first differences ≥ 0 / ≤ 0). Visited nodes are fitted (not pinned), unvisited ones
-    follow the smoothest continuation. Returns the table and the estimated-node mask as
-    :func:`fill_quadratic` does.
-    """
-    import cvxpy as cp
-
-    if table.ndim not in (1, 2):
-        raise ShapeError(f"the smooth fill is for 1-D or 2-D maps, got {table.ndim}-D")
-    if smoothness < 0:
-        raise ConfigError(f"smoothness must be >= 0, got {smoothness}")
-    mask = np.asarray(visited, dtype=bool).reshape(table.shape)
-    if not mask.any():
-        raise ConfigError("the smooth fill needs at least one visited node")
-    vals = np.asarray(table.values, dtype=np.float64)
-    scale = max(float(np.abs(vals[mask]).max()), 1e-12)
-    T = cp.Variable(table.shape)
-    fit = cp.sum_squares(cp.multiply(mask.astype(float), T - vals / scale))
-    rough = 0
-    for ax in range(table.ndim):
-        if table.shape[ax] >= 3:
-            rough = rough + cp.sum_squares(cp.diff(T, k=2, axis=ax))
-    cons = []
-    for axes, sign in ((increasing, 1.0), (decreasing, -1.0)):
-        for ax in axes:
-            if not 0 <= ax < table.ndim:
-                raise ConfigError(f"monotone axis {ax} is not an axis of a {table.ndim}-D map")
-            if table.shape[ax] >= 2:
-                cons.append(sign * cp.diff(T, k=1, axis=ax) >= 0)
-    if lower is not None:
-        cons.append(lower / scale <= T)
-    if upper is not None:
-        cons.append(upper / scale >= T)
-    prob = cp.Problem(cp.Minimize(fit + smoothness * rough), cons)
-    prob.solve(solver=cp.CLARABEL)
-    if prob.status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE):
-        raise ConfigError(f"smooth fill failed: solver status {prob.status!r}")
-    return table.with_values(np.asarray(T.value) * scale), mask
-
-
 def _factory(config: BaseModel) -> LpvObserver:
     assert isinstance(config, LpvConfig)
     return LpvObserver(config)
 
 
-LPV_SPECS = (
-    EstimatorSpec(
-        name="lpv",
-        title="LPV adaptive observer (MAF error map)",
-        description="Air-path LPV observer with an LMI gain over the ρ box and a gradient "
-        "law on the active map elements; estimates the additive MAF error ΔW_c(u_δ, n_e).",
-        paper="Zhang et al. (2015), Sensors 15 — the LPV paper",
-        config_model=LpvConfig,
-        factory=_factory,
-    ),
+LPV = EstimatorSpec(
+    name="lpv",
+    title="LPV adaptive observer (MAF error map)",
+    description="Air-path LPV observer with an LMI gain over the ρ box and a gradient "
+    "law on the active map elements; estimates the additive MAF error ΔW_c(u_δ, n_e).",
+    paper="Zhang et al. (2015), Sensors 15 — the LPV paper",
+    kind=EstimatorKind.MAP_OBSERVER,
+    config_model=LpvConfig,
+    factory=_factory,
+    state_class=LpvState,
+    output_units=OUTPUT_UNITS,
 )
+LPV_SPECS = (LPV,)

@@ -1,4 +1,4 @@
-"""Diesel air path with EGR and VGT as a ground-truth simulator (ALGORITHMS.md §6).
+"""Diesel air path with EGR and VGT as a ground-truth simulator (docs/algorithms.md §6).
 
 The plant is the Wahlström & Eriksson (2011) mean value model (LPV (1)–(2)) scaled to a
 ~2.0 L four-cylinder common-rail diesel (:mod:`estimation.plants.airpath_params`); the
@@ -7,20 +7,21 @@ cylinder] and speed ``n_e`` [rpm] drives it, with ``u_egr, u_vgt`` [%] from
 :class:`ActuatorSchedule` (or given). The measured MAF carries a configurable error:
 
 - ``additive_2d`` — ``W_c,meas = W_c + ΔW_c(u_δ, n_e)`` (LPV (7)), ``ΔW_c`` a bilinear table
-  (clamped outside its grid, ALGORITHMS.md §1) on the LPV grid ``u_δ = 0:4:56`` mg/cycle ×
+  (clamped outside its grid, docs/algorithms.md §1) on the LPV grid ``u_δ = 0:4:56`` mg/cycle ×
   ``n_e = 0:250:3000`` rpm by default;
 - ``relative_1d`` — ``W_c,meas = (1 + q(W_c)) W_c`` (EKF (6)), ``q`` a 1-D table over
   ``W_c`` [kg/s];
 
 plus white Gaussian noise on every measured signal (:class:`NoiseSpec`, optionally averaged
-over several ECU readings per logged sample).
+over several ECU readings per logged sample); both are in
+:mod:`estimation.plants.airpath_sensors`.
 
 The scheduling vector ρ of LPV (3) is computed from the measured signals
-(:func:`rho_from_measurements`). Its ``rho1`` channel is ``W_c/ω_t`` evaluated through the
-intake-manifold mass balance (LPV (1), first row) rather than through the compressor map:
-the map's flow at the measured pressure ratio is ill-conditioned (see
-:func:`rho_from_measurements`); the paper's literal compressor-map value is kept as
-``rho1_compressor``.
+(:func:`~estimation.plants.airpath_rho.rho_from_measurements`). Its ``rho1`` channel is
+``W_c/ω_t`` evaluated through the intake-manifold mass balance (LPV (1), first row) rather
+than through the compressor map: the map's flow at the measured pressure ratio is
+ill-conditioned (see :mod:`estimation.plants.airpath_rho`); the paper's literal
+compressor-map value is kept as ``rho1_compressor``.
 
 Example
 -------
@@ -36,40 +37,19 @@ from __future__ import annotations
 import hashlib
 from collections import OrderedDict
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 
 from estimation.errors import ConfigError, ShapeError
 from estimation.kernels import airpath_plant as apk
-from estimation.plants.airpath_params import (
-    SCANIA_REFERENCE,
-    ActuatorSchedule,
-    AirpathParams,
-    AirpathScaling,
-)
+from estimation.plants.airpath_params import ActuatorSchedule, AirpathParams
+from estimation.plants.airpath_rho import manifold_rho1, rho_from_measurements
+from estimation.plants.airpath_sensors import MafErrorSpec, NoiseSpec
+from estimation.plants.sampling import decimation
 from estimation.signals import Signals
-from estimation.table import Axis, Table
 
-__all__ = [
-    "SCANIA_REFERENCE",
-    "ActuatorSchedule",
-    "AirpathParams",
-    "AirpathScaling",
-    "AirpathTruth",
-    "MafErrorSpec",
-    "NoiseSpec",
-    "actuator_feedforward",
-    "default_maf_error_2d",
-    "default_maf_relative_error",
-    "lpv_rhs",
-    "rho_from_measurements",
-    "simulate_airpath",
-]
-
-FUEL_AXIS_MG = np.arange(0.0, 56.0 + 1e-9, 4.0)  # LPV §4 grid, mg/cycle
-SPEED_AXIS_RPM = np.arange(0.0, 3000.0 + 1e-9, 250.0)  # LPV §4 grid, rpm
-MAF_AXIS_KG_S = np.linspace(0.0, 0.2, 11)  # EKF-style 1-D grid over W_c, kg/s
+__all__ = ["UNITS", "AirpathTruth", "actuator_feedforward", "simulate_airpath"]
 
 SPEED_RANGE_RPM = (300.0, 5000.0)
 FUEL_RANGE_MG = (0.0, 80.0)
@@ -96,159 +76,6 @@ UNITS = {
     "rho4": "kg/(s Pa)",
     "rho5": "1/s",
 }
-
-
-def default_maf_error_2d(fuel_mg_per_cycle: np.ndarray, speed_rpm: np.ndarray) -> np.ndarray:
-    """Default additive MAF error ``ΔW_c(u_δ, n_e)`` [kg/s] (a smooth stand-in for LPV Fig. 3).
-
-    With ``u = u_δ/56`` and ``n = n_e/3000``:
-    ``ΔW_c = 10⁻³ (−0.4 + 1.6 n + 1.0 u n − 0.8 u² + 0.6 sin(π n) sin(π u))`` kg/s,
-    i.e. −0.4 … +1.9 g/s: a few % of the flows of the ~2 L engine (15 g/s at idle,
-    60–150 g/s at load), crossing zero at low speed so the map has both signs.
-    """
-    u = np.asarray(fuel_mg_per_cycle, dtype=np.float64) / 56.0
-    n = np.asarray(speed_rpm, dtype=np.float64) / 3000.0
-    return 1e-3 * (
-        -0.4 + 1.6 * n + 1.0 * u * n - 0.8 * u * u + 0.6 * np.sin(np.pi * n) * np.sin(np.pi * u)
-    )
-
-
-def default_maf_relative_error(maf_kg_s: np.ndarray) -> np.ndarray:
-    """Default relative MAF error ``q(W)`` [-] for EKF (6), ``w = W / 0.2 kg/s``:
-    ``q = 0.04 − 0.07 w + 0.03 sin(2π w)`` (+5 % at low flow, −4 % near 0.15 kg/s)."""
-    w = np.asarray(maf_kg_s, dtype=np.float64) / 0.2
-    return 0.04 - 0.07 * w + 0.03 * np.sin(2.0 * np.pi * w)
-
-
-@dataclass(frozen=True, slots=True)
-class MafErrorSpec:
-    """Which MAF error the simulator injects, with its true table.
-
-    ``kind``: ``"additive_2d"`` (table over ``(fuel_mg_per_cycle, speed_rpm)``, values in
-    kg/s, LPV (7)), ``"relative_1d"`` (table over ``maf_kg_s``, values ``q`` dimensionless,
-    EKF (6)) or ``"none"``.
-    """
-
-    kind: Literal["additive_2d", "relative_1d", "none"]
-    table: Table | None = None
-
-    def __post_init__(self) -> None:
-        if self.kind == "none":
-            if self.table is not None:
-                raise ConfigError("MafErrorSpec(kind='none') takes no table")
-            return
-        if self.kind not in ("additive_2d", "relative_1d"):
-            raise ConfigError(
-                f"MafErrorSpec.kind must be 'additive_2d', 'relative_1d' or 'none', "
-                f"got {self.kind!r}"
-            )
-        if not isinstance(self.table, Table):
-            raise ConfigError(f"MafErrorSpec({self.kind!r}) needs a Table, got {self.table!r}")
-        want = 2 if self.kind == "additive_2d" else 1
-        if self.table.ndim != want:
-            raise ConfigError(
-                f"MafErrorSpec({self.kind!r}) needs a {want}-D table, got {self.table.ndim}-D"
-            )
-        if self.kind == "relative_1d" and np.any(self.table.values <= -1.0):
-            raise ConfigError(
-                f"relative MAF error q must be > -1 everywhere, got min {self.table.values.min()}"
-            )
-
-    @classmethod
-    def none(cls) -> MafErrorSpec:
-        return cls("none")
-
-    @classmethod
-    def additive_2d(cls, table: Table | None = None) -> MafErrorSpec:
-        """LPV (7) additive map; default :func:`default_maf_error_2d` on the LPV grid."""
-        if table is None:
-            uu, nn = np.meshgrid(FUEL_AXIS_MG, SPEED_AXIS_RPM, indexing="ij")
-            table = Table(
-                [
-                    Axis("fuel_mg_per_cycle", "mg/cycle", FUEL_AXIS_MG),
-                    Axis("speed_rpm", "rpm", SPEED_AXIS_RPM),
-                ],
-                default_maf_error_2d(uu, nn),
-            )
-        return cls("additive_2d", table)
-
-    @classmethod
-    def relative_1d(cls, table: Table | None = None) -> MafErrorSpec:
-        """EKF (6) relative map; default :func:`default_maf_relative_error` on 0:0.02:0.2."""
-        if table is None:
-            table = Table(
-                [Axis("maf_kg_s", "kg/s", MAF_AXIS_KG_S)],
-                default_maf_relative_error(MAF_AXIS_KG_S),
-            )
-        return cls("relative_1d", table)
-
-    def error_kg_s(
-        self, w_c_kg_s: np.ndarray, fuel_mg_per_cycle: np.ndarray, speed_rpm: np.ndarray
-    ) -> np.ndarray:
-        """The injected error ``W_c,meas − W_c`` [kg/s] (before noise) at each sample."""
-        w = np.asarray(w_c_kg_s, dtype=np.float64)
-        if self.kind == "none":
-            return np.zeros_like(w)
-        assert self.table is not None
-        if self.kind == "additive_2d":
-            return self.table.evaluate(np.column_stack([fuel_mg_per_cycle, speed_rpm]))
-        return self.table.evaluate(w[:, None]) * w
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"kind": self.kind, "table": None if self.table is None else self.table.to_dict()}
-
-
-@dataclass(frozen=True, slots=True)
-class NoiseSpec:
-    """White Gaussian sensor noise: standard deviation of one sensor reading (0: channel off).
-
-    ``maf_rel`` and ``omega_t_rel`` are relative to the reading (1 % and 0.5 %);
-    ``p_im_pa``, ``p_em_pa`` absolute (1 kPa); ``speed_rpm``, ``fuel_mg`` absolute (0: the
-    crank-angle speed and the ECU fuel command are taken as exact).
-
-    ``averaged_readings`` (N ≥ 1) is the ECU's sampling model: each logged sample is the mean
-    of N independent readings taken over the sample period (a boxcar anti-aliasing filter,
-    e.g. an ECU reading its sensors in a 10 ms task and logging at 10 Hz: N = 10). The
-    logged noise of every channel is then ``σ/√N`` (:meth:`logged_scale`). The signal itself
-    is point-sampled: the boxcar's delay of half a sample period is not modelled. With the
-    default N = 1 the levels above are those of the logged samples.
-    """
-
-    maf_rel: float = 0.01
-    p_im_pa: float = 1000.0
-    p_em_pa: float = 1000.0
-    omega_t_rel: float = 0.005
-    speed_rpm: float = 0.0
-    fuel_mg: float = 0.0
-    averaged_readings: int = 1
-
-    def __post_init__(self) -> None:
-        for name in ("maf_rel", "p_im_pa", "p_em_pa", "omega_t_rel", "speed_rpm", "fuel_mg"):
-            v = getattr(self, name)
-            if not np.isfinite(v) or v < 0:
-                raise ConfigError(f"NoiseSpec.{name} must be finite and ≥ 0, got {v}")
-        n = self.averaged_readings
-        if isinstance(n, bool) or not isinstance(n, int | np.integer) or not 1 <= n <= 100_000:
-            raise ConfigError(f"NoiseSpec.averaged_readings must be an integer ≥ 1, got {n!r}")
-
-    @classmethod
-    def off(cls) -> NoiseSpec:
-        return cls(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-
-    def logged_scale(self) -> float:
-        """Factor ``1/√N`` from a reading's σ to the logged sample's σ."""
-        return 1.0 / float(np.sqrt(self.averaged_readings))
-
-    def to_dict(self) -> dict[str, float]:
-        return {
-            "maf_rel": self.maf_rel,
-            "p_im_pa": self.p_im_pa,
-            "p_em_pa": self.p_em_pa,
-            "omega_t_rel": self.omega_t_rel,
-            "speed_rpm": self.speed_rpm,
-            "fuel_mg": self.fuel_mg,
-            "averaged_readings": int(self.averaged_readings),
-        }
 
 
 # True channels recorded by the kernel, name in the truth → kernel column.
@@ -358,130 +185,6 @@ def actuator_feedforward(
         apk.schedule_ff(u[k], n[k], ctl, tmp)
         out[k] = tmp
     return out[:, 0], out[:, 1], out[:, 2]
-
-
-def lpv_rhs(
-    x: np.ndarray,
-    rho: np.ndarray,
-    w_f_kg_s: np.ndarray,
-    p_t_eta_m_w: np.ndarray,
-    *,
-    a1: float,
-    a2: float | np.ndarray,
-    J_t: float,
-) -> np.ndarray:
-    """``ẋ = A(ρ) x + E`` of LPV (4)–(5) for rows ``x = (p_im, p_em, ω_t)``.
-
-    ``A(ρ) = [[−a1ρ3, a1ρ2, a1ρ1], [a2ρ3, −a2(ρ2+ρ4), 0], [0, 0, −ρ5]]``,
-    ``E = (0, a2 W_f, P_t η_m / (J_t ω_t))``. Shapes ``(n, 3)``, ``(n, 5)``, ``(n,)``.
-    """
-    x = np.atleast_2d(np.asarray(x, dtype=np.float64))
-    rho = np.atleast_2d(np.asarray(rho, dtype=np.float64))
-    p_im, p_em, w = x[:, 0], x[:, 1], x[:, 2]
-    r1, r2, r3, r4, r5 = rho.T
-    a2 = np.asarray(a2, dtype=np.float64)
-    return np.column_stack(
-        [
-            a1 * (-r3 * p_im + r2 * p_em + r1 * w),
-            a2 * (r3 * p_im - (r2 + r4) * p_em + w_f_kg_s),
-            -r5 * w + np.asarray(p_t_eta_m_w) / (J_t * w),
-        ]
-    )
-
-
-def rho_from_measurements(
-    p_im_pa: np.ndarray,
-    p_em_pa: np.ndarray,
-    omega_t_rad_s: np.ndarray,
-    u_egr_pos_pct: np.ndarray,
-    u_vgt_pos_pct: np.ndarray,
-    fuel_mg_per_cycle: np.ndarray,
-    speed_rpm: np.ndarray,
-    *,
-    time_s: np.ndarray | None = None,
-    rho1_model: Literal["manifold", "compressor"] = "manifold",
-    params: AirpathParams | None = None,
-    n_iter: int = 12,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """ρ of LPV (3), ``T_em`` [K] and ``W_egr`` [kg/s] from measured signals.
-
-    Evaluates the plant's own sub-models (so ρ is what an observer with a perfect model
-    would compute); the exhaust temperature comes from the Seiliger model's fixed point
-    (``n_iter`` iterations). ``ρ2 … ρ5`` are LPV (3) as printed. Returns
-    ``(rho (n, 5) in the units of UNITS, t_em (n,), w_egr (n,))``.
-
-    ``ρ1 = W_c/ω_t`` [kg/rad] has two evaluations that agree on the true trajectory:
-
-    - ``"compressor"`` — LPV (3) literally, ``ρ1 = p_amb π R_c³ Φ_c(p_im, ω_t)/(R_a T_amb)``.
-      It is ill-conditioned in the measured pressure: at low turbo speed the whole speed
-      line spans about 1 kPa of boost (``Ψ_c ∝ (Π_c^(1−1/γa) − 1)/ω_t²``), and below ambient
-      the inlet restriction passes ~0.05–0.1 kg/s per kPa, so ``|∂W_c/∂p_im|`` reaches
-      ~1e−4 kg/(s Pa). On the WHTC (``maf-whtc``), 1 kPa of white pressure noise makes
-      ``ρ1`` exactly 0 in 3 % of the samples and biases ``ρ1 ω_t`` by +3.9 g/s on average,
-      five times the MAF error the observer is to find (0.8 g/s); at 0.32 kPa the bias is
-      still +0.75 g/s.
-    - ``"manifold"`` (default) — the intake-manifold mass balance, LPV (1) first row solved
-      for ``W_c``: ``ρ1 = (ρ3 p_im − ρ2 p_em + ṗ_im/a1)/ω_t``, i.e. ``(W_ei − W_egr +
-      ṗ_im/a1)/ω_t``, with ``a1 = R_a T_im/V_im`` (LPV (5)) and ``ṗ_im`` the backward
-      difference of the measured ``p_im`` over ``time_s`` (causal, and the derivative the
-      observer's implicit-Euler step holds over each sample; the first sample takes the
-      first difference). The engine-side sub-models are well conditioned (``W_ei ∝ p_im``;
-      the EGR valve's ``Ψ_egr`` has a bounded slope) and the differenced noise telescopes
-      under the observer's averaging, so noise enters ``ρ1`` nearly unbiased: −0.05 g/s at
-      1 kPa, +0.001 g/s at 0.32 kPa on the WHTC. Its per-sample scatter (1.8 g/s RMS at
-      1 kPa, mostly the EGR flow near ``Π_egr ≈ 1``) is what the observer has to average.
-
-    ``time_s`` (n,) [s], strictly increasing, is required for ``"manifold"``.
-    """
-    prm = (params or AirpathParams.scaled()).to_vector()
-    cols = [
-        np.ascontiguousarray(a, dtype=np.float64)
-        for a in (
-            p_im_pa,
-            p_em_pa,
-            omega_t_rad_s,
-            u_egr_pos_pct,
-            u_vgt_pos_pct,
-            fuel_mg_per_cycle,
-            speed_rpm,
-        )
-    ]
-    n = cols[0].size
-    if any(c.shape != (n,) for c in cols):
-        raise ShapeError(f"all inputs must be 1-D of length {n}, got {[c.shape for c in cols]}")
-    if rho1_model not in ("manifold", "compressor"):
-        raise ConfigError(f"rho1_model must be 'manifold' or 'compressor', got {rho1_model!r}")
-    rho = np.empty((n, 5))
-    t_em = np.empty(n)
-    w_egr = np.empty(n)
-    if rho1_model == "manifold" and time_s is None:
-        raise ConfigError("time_s is needed for the manifold ρ1 (or pass rho1_model='compressor')")
-    apk.airpath_rho_kernel(*cols, int(n_iter), prm, rho, t_em, w_egr)
-    if rho1_model == "manifold":
-        a1 = prm[apk.R_A] * prm[apk.T_IM] / prm[apk.V_IM]
-        rho[:, 0] = _manifold_rho1(rho, cols[0], cols[1], cols[2], time_s, a1)
-    return rho, t_em, w_egr
-
-
-def _manifold_rho1(
-    rho: np.ndarray,
-    p_im: np.ndarray,
-    p_em: np.ndarray,
-    omega_t: np.ndarray,
-    time_s: np.ndarray | Any,
-    a1: float,
-) -> np.ndarray:
-    """``ρ1 = (ρ3 p_im − ρ2 p_em + ṗ_im/a1)/ω_t`` with the backward-difference ``ṗ_im``
-    (see :func:`rho_from_measurements`)."""
-    n = p_im.size
-    t = np.asarray(time_s, dtype=np.float64)
-    if t.shape != (n,) or (n > 1 and np.any(np.diff(t) <= 0)):
-        raise ShapeError(f"time_s must be strictly increasing with {n} samples, got {t.shape}")
-    dp_dt = np.zeros(n)
-    if n > 1:
-        dp_dt[1:] = np.diff(p_im) / np.diff(t)
-        dp_dt[0] = dp_dt[1]
-    return (rho[:, 2] * p_im - rho[:, 1] * p_em + dp_dt / a1) / omega_t
 
 
 def _as_1d(name: str, values: Any, n: int | None = None) -> np.ndarray:
@@ -633,13 +336,7 @@ def simulate_airpath(
         inputs[:, 3] = vgt
     if not (np.isfinite(rate_hz) and rate_hz > 0):
         raise ConfigError(f"rate_hz must be > 0, got {rate_hz}")
-    ratio = internal_rate_hz / rate_hz
-    n_sub = round(ratio)
-    if n_sub < 1 or abs(ratio - n_sub) > 1e-9 * ratio:
-        raise ConfigError(
-            f"internal_rate_hz / rate_hz must be a whole number ≥ 1, got "
-            f"{internal_rate_hz:g} / {rate_hz:g} = {ratio:g}"
-        )
+    n_sub = decimation(rate_hz, internal_rate_hz)
     if not 100.0 <= internal_rate_hz <= 20000.0:
         raise ConfigError(f"internal_rate_hz must be in [100, 20000], got {internal_rate_hz:g}")
     if not (np.isfinite(warmup_s) and 0.0 <= warmup_s <= 600.0):
@@ -719,7 +416,7 @@ def simulate_airpath(
         *measured, rho1_model="compressor", params=params
     )
     rho_m = rho_c.copy()
-    rho_m[:, 0] = _manifold_rho1(rho_c, p_im_m, p_em_m, omega_m, t_out, params.a1)
+    rho_m[:, 0] = manifold_rho1(rho_c, p_im_m, p_em_m, omega_m, t_out, params.a1)
     channels = {
         "fuel_mg_per_cycle": fuel_m,
         "speed_rpm": speed_m,

@@ -1,7 +1,7 @@
 """Engine-out NOx ground truth: a drifting static map seen through a delayed, lagged sensor.
 
 Source: Guardiola et al., *SKF look-up table NOx* paper (``papers/skf-lookup-table-nox.txt``),
-§6.1 (23)–(33) and the case-study settings (34), (36); ALGORITHMS.md §2.6 and §6.
+§6.1 (23)–(33) and the case-study settings (34), (36); docs/algorithms.md §2.6 and §6.
 
 Model, per sample ``k`` at the record's fixed sample period ``Ts`` (50 Hz in the paper):
 
@@ -11,7 +11,7 @@ Model, per sample ``k`` at the record's fixed sample period ``Ts`` (50 Hz in the
       m_f = [0:5:30 34:4:50 55:5:80]                      mg/stroke    (18 breakpoints)
 
   Node values come from :func:`nox_base_ppm` (smooth, documented there); between nodes the
-  map is bilinear interpolation (SKF (10)), clamped outside the grid (ALGORITHMS.md §1). The
+  map is bilinear interpolation (SKF (10)), clamped outside the grid (docs/algorithms.md §1). The
   truth *is* the table, so a perfect estimator can reach zero map error.
 * **Drift / aging** — at engine age ``A`` hours the true map is affine in age::
 
@@ -21,7 +21,7 @@ Model, per sample ``k`` at the record's fixed sample period ``Ts`` (50 Hz in the
   (default 5 ppm/h, additive, uniform over the map). ``A_k = start_age_h + (t_k − t_0)/3600``.
 * **True NOx** (SKF (24)) — ``x(k) = T_{A_k}(n_k, m_f,k)``. Because interpolation is linear in
   the node values, this equals ``(1 + γ·A_k)·T_base(u_k) + δ·A_k``.
-* **Sensor** (SKF (2), (25); ALGORITHMS.md §2.6) — delay of ``τ`` samples and first-order lag::
+* **Sensor** (SKF (2), (25); docs/algorithms.md §2.6) — delay of ``τ`` samples and first-order lag::
 
       y_M(k) = a·y_M(k−1) + (1−a)·x(k−τ)
 
@@ -80,7 +80,7 @@ _SPEED_BASE_FRACTION = 0.5
 
 @dataclass(frozen=True, slots=True)
 class NoxFilterSettings:
-    """Filter calibration of the paper's NOx case (ALGORITHMS.md §2.6).
+    """Filter calibration of the paper's NOx case (docs/algorithms.md §2.6).
 
     ``sigma_v2`` measurement noise variance [ppm²], ``sigma_w2`` random-walk variance of each
     table cell per sample [ppm²], ``sigma_f2`` extra process noise on the sensor state ``y_M``

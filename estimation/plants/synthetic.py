@@ -1,4 +1,4 @@
-"""The synthetic checks of the SKF paper, §5 (ALGORITHMS.md §2.7), as data generators.
+"""The synthetic checks of the SKF paper, §5 (docs/algorithms.md §2.7), as data generators.
 
 Source: Guardiola et al., *SKF look-up table NOx* paper (``papers/skf-lookup-table-nox.txt``),
 (20)–(22) and §5.1–5.3. A static 4×4 table, no sensor dynamics::
@@ -64,7 +64,7 @@ SIM2_AREAS_PAPER: tuple[tuple[int, int, int, int], ...] = (
 
 @dataclass(frozen=True, slots=True)
 class SkfSimFilterSettings:
-    """Filter settings of SKF §5 (ALGORITHMS.md §2.7), for callers running the checks.
+    """Filter settings of SKF §5 (docs/algorithms.md §2.7), for callers running the checks.
 
     theta0 : initial table value of every cell (``x0 = 0``).
     P0 : initial variance of every cell (``P0 = [0]``).

@@ -1,4 +1,4 @@
-"""Engine torque estimation (TQ §III, §V; ALGORITHMS.md §5): configs, states, estimators."""
+"""Engine torque estimation (TQ §III, §V; docs/algorithms.md §5): configs, states, estimators."""
 
 from estimation.torque.config import (
     AdaptiveConstConfig,

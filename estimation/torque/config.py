@@ -1,4 +1,4 @@
-"""Typed configurations of the torque estimators (TQ §III, §V; ALGORITHMS.md §5).
+"""Typed configurations of the torque estimators (TQ §III, §V; docs/algorithms.md §5).
 
 Defaults are the paper's simulation values (TQ §VI): ``k = 0.01 s``, ``λ1 = 150 N·m``,
 ``ℓ = 10 s⁻¹``, ``Γ = diag(0.1, 100)`` for TQ (50), ``κ = 0.1``. TQ gives no Γ for (54) but
@@ -19,7 +19,8 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from estimation.plants.torque import AIR_CHANNEL, LOAD_CHANNEL, SPEED_CHANNEL, SiEngineParams
+from estimation.plants.torque import AIR_CHANNEL, LOAD_CHANNEL, SPEED_CHANNEL
+from estimation.plants.torque_params import SiEngineParams
 
 AIR_UNIT_SCALE: dict[str, float] = {"kg/s": 1.0, "g/s": 1.0e3, "kg/h": 3.6e3}
 """Factor from the measured ṁ_ai [kg/s] to the unit it enters the regressor Φ in."""

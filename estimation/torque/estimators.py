@@ -17,17 +17,17 @@ State is explicit (:class:`TorqueState`): frozen, serialisable, with the step co
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import Any, ClassVar, Self
+from typing import ClassVar
 
 import numpy as np
-from pydantic import BaseModel
 
 from estimation.errors import ConfigError, ShapeError, StateError
-from estimation.estimator import EstimatorSpec, Snapshot
+from estimation.estimator import ChunkedEstimator
 from estimation.kernels import torque as kt
+from estimation.registry import EstimatorKind, EstimatorSpec, family
 from estimation.signals import Signals
+from estimation.state import EstimatorState
 from estimation.torque.config import (
     AIR_UNIT_SCALE,
     AdaptiveConfig,
@@ -56,7 +56,7 @@ CONFIGS: dict[str, type[TorqueEstimatorConfig]] = {
 
 
 @dataclass(frozen=True, slots=True, eq=False)
-class TorqueState:
+class TorqueState(EstimatorState):
     """State of every torque estimator at sample ``step`` (samples consumed so far).
 
     ``x`` holds the observer states: ``[N_f, τ_lf]`` (uio), ``[N_f]`` (dirty), ``[N̂, τ̂_e]``
@@ -64,8 +64,6 @@ class TorqueState:
     ``Q`` (2,), ``R = K⁻¹`` (2, 2) and ``theta = Θ̂`` (2,); the others hold them empty.
     """
 
-    kind: str
-    step: int
     x: np.ndarray
     P: np.ndarray
     Q: np.ndarray
@@ -74,43 +72,15 @@ class TorqueState:
 
     ARRAYS: ClassVar[tuple[str, ...]] = ("x", "P", "Q", "R", "theta")
 
-    def copy(self) -> Self:
-        return dataclasses.replace(
-            self, **{name: np.array(getattr(self, name), dtype=np.float64) for name in self.ARRAYS}
-        )
 
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-able data (Python floats round-trip exactly through JSON)."""
-        out: dict[str, Any] = {"state_class": type(self).__name__, "kind": self.kind}
-        out["step"] = self.step
-        for name in self.ARRAYS:
-            value = getattr(self, name)
-            out[name] = {
-                "dtype": str(value.dtype),
-                "shape": list(value.shape),
-                "data": value.ravel().tolist(),
-            }
-        return out
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> Self:
-        saved = data.get("state_class", cls.__name__)
-        if saved != cls.__name__:
-            raise StateError(f"saved {saved!r} cannot be loaded as {cls.__name__}")
-        missing = [n for n in ("kind", "step", *cls.ARRAYS) if n not in data]
-        if missing:
-            raise StateError(f"{cls.__name__}: saved state lacks {missing}")
-        arrays: dict[str, np.ndarray] = {}
-        for name in cls.ARRAYS:
-            raw = data[name]
-            try:
-                if raw["dtype"] != "float64":
-                    raise ValueError(f"dtype {raw['dtype']!r} is not float64")
-                arrays[name] = np.array(raw["data"], dtype=np.float64).reshape(raw["shape"])
-            except (KeyError, TypeError, ValueError) as exc:
-                raise StateError(f"{cls.__name__}: bad array {name!r}: {exc}") from exc
-        return cls(kind=str(data["kind"]), step=int(data["step"]), **arrays)
-
+OUTPUT_UNITS = {
+    "torque_nm": "N·m",
+    "theta1": "N·m/rpm",
+    "theta2": "",  # N·m per air_unit of ṁ_ai: depends on the config
+    "pe_lambda_min": "",  # λ_min(P) in the mixed units of P
+}
+"""Units of the outputs; the adaptive laws yield all four, the others ``torque_nm``."""
+_TORQUE_ONLY = {"torque_nm": OUTPUT_UNITS["torque_nm"]}
 
 _EMPTY = np.zeros(0)
 _X_SIZE = {"uio": 2, "dirty": 1, "smo": 2, "adaptive-const": 4, "adaptive-tv": 4}
@@ -203,8 +173,24 @@ def run_chunk(
     return dataclasses.replace(new, step=state.step + n), out
 
 
-class TorqueEstimator:
-    """One of the TQ torque estimators; ``name`` selects the law, ``config`` its constants."""
+@dataclass(frozen=True, slots=True, eq=False)
+class TorquePrepared:
+    """A log turned into kernel inputs: ``speed_rpm``, ``load_nm`` (and ``air_kg_s``) as
+    contiguous float64 arrays, the sample times and the (uniform) sample period."""
+
+    inputs: dict[str, np.ndarray]
+    time_s: np.ndarray
+    sample_period_s: float
+
+
+class TorqueEstimator(ChunkedEstimator[TorqueState, TorquePrepared]):
+    """One of the TQ torque estimators; ``name`` selects the law, ``config`` its constants.
+
+    ``run``, ``fit`` and the state check are :class:`~estimation.estimator.ChunkedEstimator`'s.
+    The observers integrate every sample, so an ``accept`` mask may not reject any.
+    """
+
+    state_class = TorqueState
 
     def __init__(self, name: str, config: TorqueEstimatorConfig) -> None:
         if name not in CONFIGS:
@@ -229,21 +215,16 @@ class TorqueEstimator:
             names.append(c.air_channel)
         return names
 
+    def signal_roles(self) -> dict[str, list[str]]:
+        return {"input": self.required_signals()}
+
+    def output_names(self) -> tuple[str, ...]:
+        return tuple(OUTPUT_UNITS if self.name in ADAPTIVE else _TORQUE_ONLY)
+
     def initial_state(self) -> TorqueState:
         return initial_state(self.name, self.config)
 
-    def run(
-        self,
-        signals: Signals,
-        *,
-        every: int | None = None,
-        state: TorqueState | None = None,
-        accept: np.ndarray | None = None,
-    ) -> Iterator[Snapshot]:
-        """Estimate over the whole log in chunks of ``every`` samples, yielding a snapshot
-        after each. ``state`` (from a snapshot, or :meth:`TorqueState.from_dict`) resumes
-        where it stopped. The observers integrate every sample, so an ``accept`` mask may
-        not reject any."""
+    def prepare(self, signals: Signals, accept: np.ndarray | None = None) -> TorquePrepared:
         signals.require(self.required_signals())
         n = len(signals)
         ts = signals.sample_period()
@@ -256,49 +237,20 @@ class TorqueEstimator:
                     f"{self.name} integrates every sample; the accept mask rejects "
                     f"{int(np.count_nonzero(~mask))} of them"
                 )
-        if state is None:
-            state = self.initial_state()
-        self._check_state(state, n)
-        chunk = n if every is None else int(every)
-        if chunk < 1:
-            raise ConfigError(f"every must be >= 1 sample, got {every}")
-        inputs = self._inputs(signals)
-        if state.step == n:
-            empty = {name: np.empty(0) for name in self._output_names()}
-            yield self._snapshot(state, signals, n, empty)
-            return
-        while state.step < n:
-            start = state.step
-            stop = min(start + chunk, n)
-            part = {name: v[start:stop] for name, v in inputs.items()}
-            state, outputs = run_chunk(state, self.config, part, sample_period_s=ts)
-            yield self._snapshot(state, signals, start, outputs)
-
-    def fit(self, signals: Signals, *, accept: np.ndarray | None = None) -> Snapshot:
-        """Run over the whole log in one chunk and return the final snapshot."""
-        last = None
-        for last in self.run(signals, accept=accept):  # noqa: B007
-            pass
-        assert last is not None
-        return last
-
-    def _inputs(self, signals: Signals) -> dict[str, np.ndarray]:
         c = self.config
         inputs = {"speed_rpm": signals[c.speed_channel], "load_nm": signals[c.load_channel]}
         if isinstance(c, AdaptiveConfig):
             inputs["air_kg_s"] = signals[c.air_channel]
-        return {name: np.ascontiguousarray(v, dtype=np.float64) for name, v in inputs.items()}
+        inputs = {name: np.ascontiguousarray(v, dtype=np.float64) for name, v in inputs.items()}
+        return TorquePrepared(inputs, signals.time, ts)
 
-    def _output_names(self) -> tuple[str, ...]:
-        if self.name in ADAPTIVE:
-            return ("torque_nm", "theta1", "theta2", "pe_lambda_min")
-        return ("torque_nm",)
+    def steps(self, prepared: TorquePrepared) -> int:
+        return int(prepared.time_s.size)
 
-    def _check_state(self, state: TorqueState, n: int) -> None:
-        if not isinstance(state, TorqueState):
-            raise StateError(f"{self.name} cannot resume from a {type(state).__name__}")
-        if state.kind != self.name:
-            raise StateError(f"state of a {state.kind!r} estimator cannot resume {self.name!r}")
+    def start(self, signals: Signals, prepared: TorquePrepared) -> TorqueState:
+        return self.initial_state()
+
+    def check_fit(self, state: TorqueState) -> None:
         if state.x.shape != (_X_SIZE[self.name],):
             raise StateError(
                 f"state x has shape {state.x.shape}, {self.name} needs ({_X_SIZE[self.name]},)"
@@ -310,84 +262,73 @@ class TorqueEstimator:
             or state.theta.shape != (2,)
         ):
             raise StateError(f"state arrays do not fit {self.name} (P, R (2, 2); Q, theta (2,))")
-        if not 0 <= state.step <= n:
-            raise StateError(f"state is at step {state.step}, the log has {n} samples")
 
-    def _snapshot(
-        self,
-        state: TorqueState,
-        signals: Signals,
-        start: int,
-        outputs: dict[str, np.ndarray],
-    ) -> Snapshot:
-        sample = state.step
-        time = signals.time
-        return Snapshot(
-            estimator=self.name,
-            sample=sample,
-            n_samples=len(signals),
-            time_s=float(time[sample - 1]) if sample else float(time[0]),
-            state=state,
-            chunk_start=start,
-            table=None,
-            outputs=outputs,
-            status=np.zeros(sample - start, dtype=np.int8),
-            rejected={},
+    def advance(
+        self, state: TorqueState, prepared: TorquePrepared, stop: int
+    ) -> tuple[TorqueState, dict[str, np.ndarray], np.ndarray]:
+        start = state.step
+        part = {name: v[start:stop] for name, v in prepared.inputs.items()}
+        state, outputs = run_chunk(
+            state, self.config, part, sample_period_s=prepared.sample_period_s
         )
+        return state, outputs, np.zeros(stop - start, dtype=np.int8)
+
+    def times(self, prepared: TorquePrepared) -> np.ndarray:
+        return prepared.time_s
 
 
-def _torque_spec(
-    name: str, title: str, description: str, config_model: type[TorqueEstimatorConfig]
-) -> EstimatorSpec:
-    def factory(config: BaseModel) -> TorqueEstimator:
-        assert isinstance(config, TorqueEstimatorConfig)
-        return TorqueEstimator(name, config)
-
-    return EstimatorSpec(
-        name=name,
-        title=title,
-        description=description,
-        paper=TQ_PAPER,
-        config_model=config_model,
-        factory=factory,
-        produces_map=False,
-    )
-
-
-TORQUE_SPECS: tuple[EstimatorSpec, ...] = (
-    _torque_spec(
-        "uio",
-        "Unknown input observer (torque)",
-        "Filters speed and load with 1/(ks+1) and estimates τ_e = J(N − N_f)/k + τ_lf; one "
-        "constant k, no derivative, no switching (TQ (9), (14)).",
-        UioConfig,
-    ),
-    _torque_spec(
-        "smo",
-        "Sliding-mode observer (torque)",
-        "Speed observer with switching gain λ1; the low-passed switching term is the "
-        "equivalent-control torque estimate; chatters (TQ (19)–(21)).",
-        SmoConfig,
-    ),
-    _torque_spec(
-        "dirty",
-        "Dirty differentiation (torque)",
-        "τ_e = J·s/(ks+1)[N] + τ_l: a filtered speed derivative plus the raw load; sensitive "
-        "to noise and to N̈ (TQ (23)–(24)).",
-        DirtyConfig,
-    ),
-    _torque_spec(
-        "adaptive-const",
-        "Adaptive law, constant gain (torque)",
-        "τ_e = [N, ṁ_ai]Θ(t) with Θ adapted from the filtered-error variables W1, W2 under a "
-        "constant gain Γ; reports λ_min(P) as the excitation monitor (TQ (41)–(50)).",
-        AdaptiveConstConfig,
-    ),
-    _torque_spec(
-        "adaptive-tv",
-        "Adaptive law, time-varying gain (torque)",
-        "As the constant-gain law but with the least-squares-like gain K → P⁻¹ that "
-        "compensates the excitation level (TQ (52)–(54)).",
-        AdaptiveTvConfig,
-    ),
+_spec = family(
+    TorqueEstimator,
+    TorqueEstimatorConfig,
+    kind=EstimatorKind.TORQUE,
+    paper=TQ_PAPER,
+    produces_map=False,
 )
+
+
+UIO = _spec(
+    "uio",
+    "Unknown input observer (torque)",
+    "Filters speed and load with 1/(ks+1) and estimates τ_e = J(N − N_f)/k + τ_lf; one "
+    "constant k, no derivative, no switching (TQ (9), (14)).",
+    UioConfig,
+    TorqueState,
+    _TORQUE_ONLY,
+)
+SMO = _spec(
+    "smo",
+    "Sliding-mode observer (torque)",
+    "Speed observer with switching gain λ1; the low-passed switching term is the "
+    "equivalent-control torque estimate; chatters (TQ (19)–(21)).",
+    SmoConfig,
+    TorqueState,
+    _TORQUE_ONLY,
+)
+DIRTY = _spec(
+    "dirty",
+    "Dirty differentiation (torque)",
+    "τ_e = J·s/(ks+1)[N] + τ_l: a filtered speed derivative plus the raw load; sensitive "
+    "to noise and to N̈ (TQ (23)–(24)).",
+    DirtyConfig,
+    TorqueState,
+    _TORQUE_ONLY,
+)
+ADAPTIVE_CONST = _spec(
+    "adaptive-const",
+    "Adaptive law, constant gain (torque)",
+    "τ_e = [N, ṁ_ai]Θ(t) with Θ adapted from the filtered-error variables W1, W2 under a "
+    "constant gain Γ; reports λ_min(P) as the excitation monitor (TQ (41)–(50)).",
+    AdaptiveConstConfig,
+    TorqueState,
+    OUTPUT_UNITS,
+)
+ADAPTIVE_TV = _spec(
+    "adaptive-tv",
+    "Adaptive law, time-varying gain (torque)",
+    "As the constant-gain law but with the least-squares-like gain K → P⁻¹ that "
+    "compensates the excitation level (TQ (52)–(54)).",
+    AdaptiveTvConfig,
+    TorqueState,
+    OUTPUT_UNITS,
+)
+TORQUE_SPECS: tuple[EstimatorSpec, ...] = (UIO, SMO, DIRTY, ADAPTIVE_CONST, ADAPTIVE_TV)

@@ -1,4 +1,4 @@
-"""Slow, obvious references of the five map filters (ALGORITHMS.md §1–2).
+"""Slow, obvious references of the five map filters (docs/algorithms.md §1–2).
 
 Plain numpy, dense matrices, one sample at a time, written from the equations and not from
 the kernels. Locked cells are known constants, so the covariance references remove them from
@@ -198,7 +198,7 @@ def covariance_filter(problem: Problem, kind: str) -> Result:
 
 
 def sskf_gain(eta: float, r: float) -> float:
-    """Steady-state gain of the element with weight ``1 − η`` (SKF (16), ALGORITHMS §2.3)."""
+    """Steady-state gain of the element of weight 1 − η (SKF (16); docs/algorithms.md §2.3)."""
     c = 1.0 - 2.0 * eta + 2.0 * eta**2
     s = math.sqrt(1.0 + 4.0 * r / c)
     return 0.5 * (1.0 - eta) * (1.0 + s) / (0.5 * (1.0 + s) * c + r)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import time
 
 import numpy as np
 import pytest
@@ -12,20 +11,12 @@ from numpy.testing import assert_allclose, assert_array_equal
 from estimation.cycles import load_cycle
 from estimation.errors import ConfigError, ShapeError
 from estimation.kernels import airpath_plant as apk
-from estimation.plants.airpath import (
-    ActuatorSchedule,
-    AirpathParams,
-    AirpathScaling,
-    MafErrorSpec,
-    NoiseSpec,
-    actuator_feedforward,
-    default_maf_error_2d,
-    lpv_rhs,
-    rho_from_measurements,
-    simulate_airpath,
-)
+from estimation.plants.airpath import actuator_feedforward, simulate_airpath
+from estimation.plants.airpath_params import ActuatorSchedule, AirpathParams, AirpathScaling
+from estimation.plants.airpath_rho import lpv_rhs, rho_from_measurements
+from estimation.plants.airpath_sensors import MafErrorSpec, NoiseSpec, default_maf_error_2d
+from estimation.plants.vehicle import operating_points
 from estimation.table import Axis, Table
-from estimation.vehicle import operating_points
 
 
 def steady(fuel: float, speed: float, *, egr: float | None = None, vgt: float | None = None,
@@ -129,7 +120,7 @@ def test_lpv_model_reproduces_the_plant_derivatives() -> None:
     assert_allclose(tr.rho[:, 2], tr["w_ei_kg_s"] / x[:, 0], rtol=1e-12)
     assert_allclose(tr.rho[:, 3], tr["w_t_kg_s"] / x[:, 1], rtol=1e-12)
     assert_allclose(tr.rho[:, 4], tr["p_c_w"] / (J_t * x[:, 2] ** 2), rtol=1e-10)
-    # with ALGORITHMS.md §3's constant a2 only the p_em row is off, in proportion to
+    # with docs/algorithms.md §3's constant a2 only the p_em row is off, in proportion to
     # the spread of T_em: report how close (here < 60 % of the row's RMS)
     const = lpv_rhs(x, tr.rho, tr["w_f_kg_s"], tr["p_t_eta_m_w"], a1=tr.a1, a2=tr.a2_nominal,
                     J_t=J_t)  # fmt: skip
@@ -284,13 +275,10 @@ def test_seeds_reproduce_bit_identically_and_differ_between_seeds() -> None:
 # --------------------------------------------------------------------------- robustness
 
 
-def test_long_random_sweep_is_finite_plausible_and_fast() -> None:
+def test_long_random_sweep_is_finite_and_plausible() -> None:
+    # Its speed is `mapwise bench --section simulators`, not a wall-clock assert.
     t, fuel, speed = random_steps(1800.0, seed=9)
-    simulate_airpath(t[:4], fuel[:4], speed[:4], seed=0)  # compile
-    t0 = time.perf_counter()
     sig, tr = simulate_airpath(t, fuel, speed, seed=0)
-    elapsed = time.perf_counter() - t0
-    assert elapsed < 10.0  # ≈ 1.7 s on an idle development machine (2 kHz internal rate)
     assert len(sig) == 17991  # 0 … 1799 s at 10 Hz
     for name, v in tr.channels.items():
         assert np.all(np.isfinite(v)), name

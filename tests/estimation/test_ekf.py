@@ -1,4 +1,4 @@
-"""Joint state and map EKF (estimation.observers.ekf; ALGORITHMS.md §4, EKF §5)."""
+"""Joint state and map EKF (estimation.observers.ekf; docs/algorithms.md §4, EKF §5)."""
 
 from __future__ import annotations
 
@@ -7,14 +7,15 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 from scipy.linalg import expm
 
-from app.scenario_run import run_scenario
+from app.cli.run import run_scenario
 from estimation.errors import ConfigError, SignalError, StateError
-from estimation.estimator import get_spec
 from estimation.kernels import airpath_plant as apk
 from estimation.kernels import ekf as kern
 from estimation.metrics import map_metrics
-from estimation.observers.ekf import EKF_SPECS, OUTPUT_NAMES, EkfObserver, EkfState, ekf_run
+from estimation.observers.ekf import EKF_SPECS, EkfObserver, EkfState, ekf_run
+from estimation.observers.ekf_config import OUTPUT_NAMES
 from estimation.plants.airpath_params import AirpathParams
+from estimation.registry import get_spec
 from estimation.scenarios import get_scenario
 from estimation.signals import Signals
 from estimation.table import Axis, Grid
@@ -192,6 +193,7 @@ CASES = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("name", "outputs", "extra"), CASES)
 def test_kernel_matches_plain_numpy_reference(name, outputs, extra, short) -> None:
     s = short.signals
@@ -471,6 +473,7 @@ def _table1(data) -> dict[str, dict[str, float]]:
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_table1_pattern(seed: int) -> None:
     """EKF Table 1 on maf-1d-whtc: Map ≈ Aug in state and output errors, Def clearly larger,

@@ -9,9 +9,9 @@ import pytest
 
 from estimation import ConfigError, SignalError, Signals
 from estimation.errors import StateError
-from estimation.estimator import get_spec, registry
 from estimation.filters.functions import run_chunk
 from estimation.filters.settings import grid_of, resolve_settings
+from estimation.registry import get_spec, registry
 
 FILTERS = ["kf", "skf", "sskf", "rls", "nlms"]
 

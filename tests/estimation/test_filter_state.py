@@ -12,10 +12,11 @@ import pytest
 from numpy.testing import assert_array_equal
 
 from estimation.errors import StateError
-from estimation.estimator import Snapshot, get_spec
+from estimation.estimator import Snapshot
 from estimation.filters.functions import initial_state, run_chunk, variance
 from estimation.filters.settings import grid_of, resolve_settings
 from estimation.filters.state import FilterState
+from estimation.registry import get_spec
 from tests.factories import KINDS, SENSOR_KINDS, Problem, Sensor, random_problem
 
 SENSOR = Sensor(lag=0.7, delay=4, sigma_f=0.3)

@@ -12,8 +12,9 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
 from estimation.errors import ConfigError, ShapeError
-from estimation.estimator import Snapshot, get_spec
+from estimation.estimator import Snapshot
 from estimation.filters.settings import grid_of, resolve_settings
+from estimation.registry import get_spec
 from estimation.signals import Signals
 from tests.estimation import reference as ref
 from tests.factories import Problem, Sensor, random_problem

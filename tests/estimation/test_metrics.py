@@ -1,4 +1,4 @@
-"""Metrics (ALGORITHMS.md §7) against hand-computed values."""
+"""Metrics (docs/algorithms.md §7) against hand-computed values."""
 
 from __future__ import annotations
 
@@ -11,8 +11,12 @@ from estimation.metrics import (
     convergence_time,
     map_metrics,
     output_metrics,
+    score_run,
+    series_metrics,
     torque_metrics,
 )
+from estimation.scenarios import ScenarioData
+from estimation.signals import Signals
 from estimation.table import Axis, Table
 
 GRID = [Axis("a", "", [0.0, 1.0, 2.0]), Axis("b", "", [0.0, 10.0])]
@@ -66,3 +70,57 @@ def test_convergence_time_is_the_start_of_the_final_stretch_below_threshold() ->
     assert convergence_time(t, np.array([5.0, 0.5, 3.0, 0.4, 0.3, 0.2]), 1.0) == 3.0
     assert convergence_time(t, np.full(6, 0.1), 1.0) == 0.0
     assert convergence_time(t, np.array([0.1, 0.1, 0.1, 0.1, 0.1, 2.0]), 1.0) is None
+
+
+def _truth(n: int, *, true_map: Table | None, scored: dict[str, np.ndarray]) -> ScenarioData:
+    t = np.arange(n) * 0.5
+    signals = Signals(t, {"a": np.linspace(0.0, 2.0, n), "b": np.full(n, 5.0)})
+    return ScenarioData(
+        "by-hand", 0, signals, {}, true_map=true_map, map_inputs=("a", "b"), scored_series=scored
+    )
+
+
+def test_score_run_output_rmse_over_accepted_finite_samples() -> None:
+    residual = np.array([3.0, np.nan, 4.0, 100.0])
+    status = np.array([0, 0, 0, 2], dtype=np.int8)
+    assert score_run({"residual": residual}, status) == {"output_rmse": pytest.approx(12.5**0.5)}
+    everything = score_run({"residual": residual}, None)["output_rmse"]
+    assert everything == pytest.approx(((9 + 16 + 100**2) / 3) ** 0.5)
+    assert score_run({"residual": residual[:2]}, np.array([1, 1], np.int8)) == {}
+    assert score_run({"torque_nm": residual}, None) == {}
+
+
+def test_score_run_scores_the_map_on_its_grid_only() -> None:
+    true_map = Table(GRID, [[1.0, 2.0], [3.0, 4.0], [5.0, 6.0]])
+    estimate = true_map.with_values(true_map.values + 0.5)
+    n = 9
+    truth = _truth(n, true_map=true_map, scored={})
+    got = score_run({}, None, table=estimate, truth=truth)
+    want = map_metrics(estimate, true_map, truth.scoring_points())
+    assert got == want
+    assert got["rmse"] == pytest.approx(0.5)
+    other_grid = Table([Axis("a", "", [0.0, 2.0]), GRID[1]], 0.0)
+    assert score_run({}, None, table=other_grid, truth=truth) == {}
+
+    # with a scored series, the series takes "rmse" and the map's moves to "map_rmse"
+    w_true = np.linspace(1.0, 2.0, n)
+    truth = _truth(n, true_map=true_map, scored={"w": w_true})
+    got = score_run({"w": w_true - 0.25}, None, table=estimate, truth=truth)
+    assert got["map_rmse"] == pytest.approx(0.5)
+    assert got["rmse"] == pytest.approx(0.25)
+
+
+def test_score_run_skips_series_it_cannot_score() -> None:
+    n = 20  # 10 s at 2 Hz: the torque window 5–30 s holds 10 samples
+    tau = np.linspace(0.0, 50.0, n)
+    truth = _truth(n, true_map=None, scored={"torque_nm": tau})
+    got = score_run({"torque_nm": tau + 1.0}, None, truth=truth)
+    assert got == series_metrics(truth, {"torque_nm": tau + 1.0})
+    assert got["mae"] == pytest.approx(1.0)
+    short = _truth(8, true_map=None, scored={"torque_nm": tau[:8]})  # 3.5 s: no window
+    with pytest.raises(ShapeError, match="window"):
+        series_metrics(short, {"torque_nm": tau[:8]})
+    assert score_run({"torque_nm": tau[:8]}, None, truth=short) == {}
+    with_nan = tau.copy()
+    with_nan[3] = np.nan
+    assert score_run({"torque_nm": with_nan}, None, truth=truth) == {}

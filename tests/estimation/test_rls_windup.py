@@ -1,6 +1,6 @@
 """Why the NOx scenarios give RLS a short memory and the covariance limit (estimation.scenarios).
 
-RLS with exponential forgetting (ALGORITHMS.md §2.4) winds up where the regressor stays
+RLS with exponential forgetting (docs/algorithms.md §2.4) winds up where the regressor stays
 constant: in the directions of the active block the data do not see, P grows as λ^-k. The NEDC
 at 50 Hz dwells on one operating point for thousands of samples (idle, cruises), so the
 forgetting the papers' other filters never need blows the map up unless P is capped.
@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from app.scenario_run import execute_scenario
+from app.cli.run import execute_scenario
 from estimation.scenarios import get_scenario
 
 WOUND_UP = {"forgetting": 0.995, "limit": "none"}

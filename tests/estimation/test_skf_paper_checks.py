@@ -1,4 +1,4 @@
-"""The SKF paper's synthetic checks (SKF §5, ALGORITHMS.md §2.7) and the SSKF gain (§2.3).
+"""The SKF paper's synthetic checks (SKF §5, docs/algorithms.md §2.7) and the SSKF gain (§2.3).
 
 Grid u1 = [500 1500 2500 3500], u2 = [0 20 40 60], true table all ones, θ0 = 0, P0 = 0,
 σv² = σw² = 1. Data from :func:`estimation.plants.synthetic.skf_sim` (its inputs are checked
@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from estimation.estimator import Snapshot, get_spec
+from estimation.estimator import Snapshot
 from estimation.plants.synthetic import skf_sim
+from estimation.registry import get_spec
 from estimation.signals import Signals
 from tests.estimation import reference as ref
 

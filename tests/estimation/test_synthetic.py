@@ -1,4 +1,4 @@
-"""The SKF paper's synthetic checks (SKF §5, (20)–(22); ALGORITHMS.md §2.7) as data."""
+"""The SKF paper's synthetic checks (SKF §5, (20)–(22); docs/algorithms.md §2.7) as data."""
 
 import json
 

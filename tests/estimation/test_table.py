@@ -1,4 +1,4 @@
-"""Look-up tables and their sparse regressor (ALGORITHMS.md §1) against a slow reference."""
+"""Look-up tables and their sparse regressor (docs/algorithms.md §1) against a slow reference."""
 
 from __future__ import annotations
 

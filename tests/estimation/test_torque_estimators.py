@@ -265,6 +265,7 @@ def test_observer_kernels_match_slow_reference(name: str) -> None:
     assert_allclose(got, want, rtol=1e-9, atol=1e-9)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["adaptive-const", "adaptive-tv"])
 @pytest.mark.parametrize(
     "cfg",
@@ -465,28 +466,7 @@ def seed_mean(scenario: str, key: str, metric: str) -> float:
 
 
 NOT_BEST_ON_SI = (
-    "TQ Table IV: (54) with κ = 0.1 should have the lowest ISE and SD of the four adaptive "
-    "variants (TQ: ISE 7.49e4 vs 1.55e5 for (50) κ = 0, SD 1.82 vs 2.62). On torque-si, seeds "
-    "0–4, it has ISE 159.5, 153.9, 150.1, 155.5, 151.1 N²·m²·s and SD 2.53, 2.48, 2.45, 2.49, "
-    "2.46 N·m against 123.9, 122.3, 122.1, 123.3, 121.8 and 2.23, 2.21, 2.21, 2.22, 2.21 for "
-    "(50) κ = 0 (≈ 1.25× the ISE; (50) κ = 0.1 is as good as (50) κ = 0). It tracks the slow "
-    "torque best and loses above 10 Hz (see the band-split test): τ̃ ISE below 10 Hz 14.9–17.0 "
-    "against 57.6–59.9, above 10 Hz 132–140 against 59 (57 of it the firing ripple, which no "
-    "k = 0.01 s estimator follows). 65–69 of that excess is the measured speed noise times θ̂1 in "
-    "τ̂ = ΦΘ̂: without persistent excitation (TQ Lemma 8; at constant speed N and ṁ_ai are "
-    "proportional, λ_min/λ_max of the diagonally scaled P ≈ 6e-8 from 15 to 30 s) K ≈ P⁻¹ lets "
-    "the speed noise, which enters both Φ_f and y, random-walk Θ̂ along the unexcited "
-    "direction (θ̂1 within ±(1.7…2.1) N·m/rpm against the true −0.009); the rest is W2's "
-    "instantaneous noise. Missing excitation physics does not explain the ordering: a plant "
-    "variant with induction pulsation (each cylinder draws a piston-velocity half-sine per "
-    "intake stroke, cycle mean TQ (3), through TQ (1) with V_m = 2.5 L and PRI(p_m); ṁ_ai "
-    "ripples 0.25–1.4 % peak-to-peak at N·n_cyl/120 Hz) halves the θ̂1 term (34–38) but leaves "
-    "(54) κ = 0.1 at ISE 155.9, 146.6, 151.9, 152.5, 150.4 and SD 2.50, 2.42, 2.47, 2.47, 2.45 "
-    "(its W2 noise above 10 Hz grows); (54) κ = 0 gains (ISE 111–125). With the pulsation "
-    "scaled by 0.25, 0.5, 2, 5, 10 or 20, or seen through a 1, 3 or 10 ms MAF sensor lag, "
-    "(54) κ = 0.1 has ISE 132–170 and is best on no seed; white ṁ_ai noise of 2e-5…2e-4 kg/s "
-    "(0.1–1 % of the flow), with or without the pulsation, gives 150–178. (50) with ṁ_ai in "
-    "kg/s never moves θ2 (rate Γ2·ṁ_ai²/ℓ ≈ 3e-3 /s) and so cannot drift."
+    "(54) κ = 0.1 is not the best adaptive variant: docs/estimators.md#dev-tq-not-best-on-si"
 )
 
 
@@ -522,11 +502,12 @@ def band_ise(t: np.ndarray, e: np.ndarray) -> tuple[float, float]:
 
 @pytest.mark.parametrize("seed", SEEDS)
 def test_kappa_trades_slow_tracking_for_fast_noise_on_si(seed: int) -> None:
-    """Why (54) κ = 0.1 is not best on torque-si (NOT_BEST_ON_SI): it does what TQ §VI says W2
-    is for and follows the slow torque best of the four variants, but has the largest error
-    above 10 Hz, where the 5–30 s budget lies. Seeds 0–4, τ̃ ISE below / above 10 Hz: (54)
-    κ = 0.1 14.9–17.0 / 132–140; (50) κ = 0.1 24.6–26.4 / 93–96; (54) κ = 0 37.9–65.5 /
-    70–95; (50) κ = 0 57.6–59.9 / 58.9–59.3 (the firing ripple alone gives 57.1 on seed 0)."""
+    """Why (54) κ = 0.1 is not best on torque-si (docs/estimators.md#dev-tq-not-best-on-si):
+    it does what TQ §VI says W2 is for and follows the slow torque best of the four variants,
+    but has the largest error above 10 Hz, where the 5–30 s budget lies. Seeds 0–4, τ̃ ISE
+    below / above 10 Hz: (54) κ = 0.1 14.9–17.0 / 132–140; (50) κ = 0.1 24.6–26.4 / 93–96;
+    (54) κ = 0 37.9–65.5 / 70–95; (50) κ = 0 57.6–59.9 / 58.9–59.3 (the firing ripple alone
+    gives 57.1 on seed 0)."""
     t, err = errors("torque-si", seed)
     bands = {key: band_ise(t, err[key]) for key in ADAPTIVE}
     best = "adaptive-tv/0.1"
@@ -538,12 +519,7 @@ def test_kappa_trades_slow_tracking_for_fast_noise_on_si(seed: int) -> None:
 
 @pytest.mark.xfail(
     strict=True,
-    reason="TQ Table VII ranks (50) with κ = 0.1 first on the rig (ISE 3.03e5 vs 3.56e5 for "
-    "(54) κ = 0.1, SD 1.30 vs 1.40). On torque-rig, seeds 0–4, (50) κ = 0.1 has ISE "
-    "1328–1345, SD 7.29–7.33 against 260–268, 3.19–3.24 for (54) κ = 0.1. Cause: Θ moves fast "
-    "on our diesel (θ2 = τ_i/ṁ_ai jumps at each fuel-demand step while ṁ_ai follows the 0.4 s "
-    "turbo lag) and (50) with ṁ_ai in kg/s adapts θ1 alone; with air_unit='kg/h', which "
-    "balances TQ's Γ = diag(0.1, 100), its ISE drops to 394–405, still above (54).",
+    reason="TQ Table VII ranking not reproduced: docs/estimators.md#dev-tq-rig-ranking",
 )
 @pytest.mark.parametrize("seed", SEEDS)
 def test_constant_gain_with_kappa_is_best_on_the_rig(seed: int) -> None:
@@ -574,14 +550,7 @@ def test_kappa_reduces_the_peak_error(law: str, scenario: str, seed: int) -> Non
 
 @pytest.mark.xfail(
     strict=True,
-    reason="TQ Table IV: κ = 0.1 lowers the MAE of (54) from 19.65 to 12.74 N·m. On torque-si "
-    "it raises it on 4 of 5 seeds and on the mean: seeds 0–4 38.2 → 64.7, 45.8 → 52.0, "
-    "31.5 → 25.0, 60.6 → 80.0, 14.0 → 47.8 (mean 38.0 → 53.9). Cause: without persistent "
-    "excitation Θ̂ random-walks along the unexcited direction (see the best-variant test) "
-    "and κ = 0.1 speeds the walk up, so the peak is set by an excursion anywhere in the "
-    "window, not at the speed steps. More excitation from the plant does not change it: with "
-    "induction pulsation in ṁ_ai (see NOT_BEST_ON_SI) the MAE still rises on every seed, "
-    "14.3 → 36.4, 23.9 → 30.6, 13.9 → 23.4, 39.7 → 45.6, 13.9 → 40.2 (mean 21.1 → 35.3).",
+    reason="κ = 0.1 raises the MAE of (54) on torque-si: docs/estimators.md#dev-tq-kappa-mae-si",
 )
 def test_kappa_reduces_the_peak_error_of_the_time_varying_law_on_si_on_average() -> None:
     """TQ §VI's claim for (54) in simulation, on the seed-mean MAE (seeds 0–4)."""
@@ -602,31 +571,8 @@ def test_kappa_reduces_ise_and_sd_on_the_rig(law: str, seed: int) -> None:
 
 
 W2_ON_SI = {
-    "adaptive-const": (
-        "TQ Table IV: κ = 0.1 lowers ISE and SD of (50) (1.55e5 → 1.33e5, 2.62 → 2.43). On "
-        "torque-si it makes no difference: seeds 0–4 ISE 123.9 → 123.5, 122.3 → 124.2, "
-        "122.1 → 121.4, 123.3 → 123.0, 121.8 → 122.3 (−0.6 … +1.5 %; lower on seeds 0, 2, 3), "
-        "SD 2.227 → 2.223, 2.212 → 2.229, 2.210 → 2.203, 2.219 → 2.217, 2.206 → 2.212; "
-        "seed-means ISE 122.69 → 122.90, SD 2.2149 → 2.2169. W2 feeds the instantaneous UIO "
-        "signal y, whose speed noise J/k·w1 ≈ 2.4 N·m SD sits at TQ Table III's level, into "
-        "θ̂1, while Θ of our mean value plant varies slowly (no fast combustion dynamics, "
-        "ṁ_ai noise-free): τ̃ below 10 Hz falls (ISE 57.6–59.9 → 24.6–26.4, and the peaks at "
-        "the steps, MAE 20.5 → 15.0, TQ 19.2 → 14.8) as much as τ̃ above 10 Hz rises (58.9–59.3 "
-        "→ 93.3–96.0)."
-    ),
-    "adaptive-tv": (
-        "TQ Table IV: κ = 0.1 lowers ISE and SD of (54) (1.72e5 → 7.49e4, 2.76 → 1.82). On "
-        "torque-si it raises them on 4 of 5 seeds and on the mean: seeds 0–4 ISE "
-        "128.0 → 159.5, 153.2 → 153.9, 133.8 → 150.1, 175.4 → 155.5, 110.9 → 151.1 (mean "
-        "140.3 → 154.0), SD 2.263 → 2.525, 2.475 → 2.481, 2.313 → 2.450, 2.649 → 2.494, "
-        "2.106 → 2.458 (mean 2.361 → 2.482). Cause: without persistent excitation Θ̂ "
-        "random-walks along the unexcited direction (see the best-variant test); κ = 0.1 "
-        "feeds W2's instantaneous noise into the walk, which evens out the seeds (ISE "
-        "150–160 against 111–175) but raises the level: τ̃ below 10 Hz falls (ISE 37.9–65.5 "
-        "→ 14.9–17.0), above 10 Hz it rises more (70–95 → 132–140). With induction "
-        "pulsation in ṁ_ai (see NOT_BEST_ON_SI) κ = 0.1 raises ISE and SD on every seed "
-        "(111–125 → 147–156)."
-    ),
+    "adaptive-const": "no κ effect on (50) on torque-si: docs/estimators.md#dev-tq-kappa-50-si",
+    "adaptive-tv": "κ = 0.1 hurts (54) on torque-si: docs/estimators.md#dev-tq-kappa-54-si",
 }
 
 

@@ -13,13 +13,12 @@ from numpy.testing import assert_allclose
 
 from estimation.errors import ConfigError
 from estimation.plants.torque import (
-    DieselRigParams,
-    SiEngineParams,
     TorqueTruth,
     si_steady_torque_nm,
     simulate_si_torque,
     simulate_torque_rig,
 )
+from estimation.plants.torque_params import DieselRigParams, SiEngineParams
 
 NOISE_STD = math.sqrt(20.0)  # TQ §VI N(0, 20) read as variance 20
 

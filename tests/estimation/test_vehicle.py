@@ -1,7 +1,6 @@
-"""Vehicle/gearbox/driver model and engine-cycle denormalisation (estimation.vehicle)."""
+"""Vehicle/gearbox/driver model and engine-cycle denormalisation (estimation.plants.vehicle)."""
 
 import math
-import time
 from functools import cache
 
 import numpy as np
@@ -10,8 +9,8 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 from estimation.cycles import load_cycle
 from estimation.errors import ConfigError, SignalError
-from estimation.vehicle import (
-    DieselEngine,
+from estimation.plants.engine import DieselEngine
+from estimation.plants.vehicle import (
     OperatingPoints,
     ShiftStrategy,
     Vehicle,
@@ -220,12 +219,12 @@ def test_no_nan_on_any_cycle_at_50_hz():
         assert sig.sample_period() == pytest.approx(0.02)
 
 
-def test_full_cycle_is_fast():
+def test_full_cycle_is_repeatable():
+    """Its speed is `mapwise bench --section simulators`, not a wall-clock assert."""
     cycle = load_cycle("wltc3b")
-    operating_points(cycle, rate_hz=50.0)  # compile / load the numba cache
-    t0 = time.perf_counter()
-    operating_points(cycle, rate_hz=50.0)
-    assert time.perf_counter() - t0 < 0.5
+    first = operating_points(cycle, rate_hz=50.0)  # compile / load the numba cache
+    again = operating_points(cycle, rate_hz=50.0)
+    np.testing.assert_array_equal(first.fuel_mg_per_cycle, again.fuel_mg_per_cycle)
 
 
 def test_sdmp_is_harsher_than_nedc():
@@ -276,7 +275,7 @@ def test_errors():
 
 
 def test_pchip_matches_scipy_inside_and_never_overshoots():
-    from estimation.vehicle import _pchip
+    from estimation.plants.vehicle import _pchip
 
     rng = np.random.default_rng(0)
     x = np.arange(40.0)
