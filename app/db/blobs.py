@@ -67,6 +67,8 @@ def pack_meta(arrays: Mapping[str, np.ndarray], meta: Mapping[str, Any]) -> byte
 
 
 def unpack_meta(blob: bytes) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """The inverse of :func:`pack_meta`; a blob of :func:`pack` has the document ``{}``."""
     arrays = unpack(blob)
-    meta = json.loads(arrays.pop(_STATE_META).tobytes().decode())
+    encoded = arrays.pop(_STATE_META, None)
+    meta = {} if encoded is None else json.loads(encoded.tobytes().decode())
     return arrays, meta

@@ -9,7 +9,7 @@ Each SQLite connection's private page cache is held to ``SQLITE_CACHE_KIB``. SQL
 default (2 MiB a connection) filled, page by page, as the database grew under the soak, so
 the API process, with up to 15 pooled connections, grew by up to 30 MB over half an hour
 (+11 %); the operating system's page cache already holds the file, and read latencies did
-not change with a 64 KiB cache (README, "Benchmarks": the soak).
+not change with a 64 KiB cache (the soak: docs/benchmarks.md#load).
 """
 
 from __future__ import annotations

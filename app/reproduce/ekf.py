@@ -13,12 +13,12 @@ from collections.abc import Collection, Sequence
 
 import numpy as np
 
+from app.cli.run import ScenarioRun, execute_scenario
 from app.reproduce import paper_values as pv
 from app.reproduce.figures import curve_1d, series_panels
 from app.reproduce.report import Figure, Section, Table, Text, num
-from app.scenario_run import ScenarioRun, execute_scenario
-from estimation.estimator import registry
 from estimation.metrics import output_metrics
+from estimation.registry import registry
 from estimation.scenarios import get_scenario
 
 SCENARIO = "maf-1d-whtc"

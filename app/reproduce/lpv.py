@@ -1,7 +1,7 @@
 """LPV paper §4: the MAF-sensor error map ``ΔW_c(u_δ, n_e)`` learnt by the LPV adaptive
 observer on ``maf-whtc`` (standing in for ETC part 1) and ``maf-ftp75``.
 
-The mean relative error is ``mapwise run``'s (ALGORITHMS.md §3: the final map against the
+The mean relative error is ``mapwise run``'s (docs/algorithms.md §3: the final map against the
 reference error along the cycle's operating points), set beside the paper's 10.41 % and
 5.28 % for every seed. Maps: the true one, ours on the visited cells, the error, and the
 LPV (37) quadratic fill of the unvisited region (LPV Figs. 5, 8); along the cycle: the
@@ -14,13 +14,13 @@ from collections.abc import Collection, Sequence
 
 import numpy as np
 
+from app.cli.run import ScenarioRun, execute_scenario
 from app.reproduce import paper_values as pv
 from app.reproduce.figures import map_heatmaps, map_surfaces, series_panels
 from app.reproduce.report import Figure, Section, Table, Text, num, pct
-from app.scenario_run import ScenarioRun, execute_scenario
 from estimation.errors import EstimationError
-from estimation.estimator import registry
 from estimation.metrics import cell_visits
+from estimation.registry import registry
 
 SCENARIOS = ("maf-whtc", "maf-ftp75")
 ESTIMATOR = "lpv"
@@ -47,7 +47,7 @@ def build(seeds: Sequence[int], *, known: Collection[str] | None = None) -> Sect
             "ε2 = 0.11 as LPV §4; a visit-averaging adaptation gain starting at γ = 10 instead "
             "of the paper's constant γ = 200, and ρ1 from the intake-manifold balance — see the "
             f"`lpv` docstring); seeds {', '.join(map(str, seeds))}. The mean "
-            "relative error is ALGORITHMS.md §3's: Σ_k |T̂(υ_k) − ΔW_c(υ_k)| / Σ_k |ΔW_c(υ_k)| "
+            "relative error is docs/algorithms.md §3's: Σ_k |T̂(υ_k) − ΔW_c(υ_k)| / Σ_k |ΔW_c(υ_k)| "
             "with the final map T̂ along the cycle (the paper does not define its own). Map "
             "RMSE and max |error| are over the visited cells, in kg/s."
         )
@@ -140,7 +140,7 @@ def _figures(scenario: str, run: ScenarioRun) -> list[Figure]:
     flags = [False, False, True]
     note = ""
     try:
-        from estimation.observers.lpv import fill_quadratic
+        from estimation.observers.lpv_fill import fill_quadratic
 
         filled, _ = fill_quadratic(table, visited)
         panels.append(("with the LPV (37) fill", filled.values))

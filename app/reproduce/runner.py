@@ -1,7 +1,7 @@
 """``mapwise reproduce``: run every section live and write ``report.md`` and ``report.html``.
 
 Nothing of ours is stored: each section runs the registered estimators on the catalog's
-scenarios (:func:`app.scenario_run.execute_scenario`) for the chosen seeds and puts the
+scenarios (:func:`app.cli.run.execute_scenario`) for the chosen seeds and puts the
 results beside the papers' constants (:mod:`app.reproduce.paper_values`).
 """
 

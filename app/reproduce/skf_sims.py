@@ -1,4 +1,4 @@
-"""SKF paper §5 (ALGORITHMS.md §2.7): KF, SKF and SSKF on the three synthetic problems.
+"""SKF paper §5 (docs/algorithms.md §2.7): KF, SKF and SSKF on the three synthetic problems.
 
 Scenarios ``skf-sim1..3`` (4×4 table of ones, ``θ0 = 0``, ``P0 = 0``, ``σv² = σw² = 1``).
 Each filter runs sample by sample (``every=1``) so the state and variance histories of SKF
@@ -12,10 +12,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from app.cli.run import ScenarioRun, execute_scenario
 from app.reproduce import paper_values as pv
 from app.reproduce.figures import map_heatmaps, series_panels
 from app.reproduce.report import Figure, Section, Table, Text, num
-from app.scenario_run import ScenarioRun, execute_scenario
 from estimation.metrics import cell_visits, convergence_time
 from estimation.scenarios import get_scenario
 

@@ -13,11 +13,11 @@ from collections.abc import Collection, Mapping, Sequence
 
 import numpy as np
 
+from app.cli.run import ScenarioRun, execute_scenario
 from app.reproduce import paper_values as pv
 from app.reproduce.figures import series_panels
 from app.reproduce.report import Figure, Section, Table, Text, num
-from app.scenario_run import ScenarioRun, execute_scenario
-from estimation.estimator import registry
+from estimation.registry import registry
 from estimation.scenarios import get_scenario
 
 SCENARIOS = ("torque-si", "torque-rig")
@@ -199,11 +199,11 @@ def _ordering(
     if family == "adaptive" and len(same) < len(seeds):
         roams = any(ours_best[s]["ise"] != "(54) κ = 0.1" for s in seeds)
         lines.append(_excitation(runs[seeds[0]], roams=roams))
-    claimed = "(54) κ = 0.1"  # issue 5 and ALGORITHMS.md §5: best of the four in both tables
+    claimed = "(54) κ = 0.1"  # issue 5 and docs/algorithms.md §5: best of the four in both tables
     if family == "adaptive" and claimed not in paper_best.values():
         lines.append(
             f"Note: in the paper's own {table_name} the lowest ISE and SD belong to "
-            f"{best_text}, not {claimed} as issue 5 and ALGORITHMS.md §5 state for both "
+            f"{best_text}, not {claimed} as issue 5 and docs/algorithms.md §5 state for both "
             "tables."
         )
     return verdict, " ".join(lines)
@@ -255,7 +255,7 @@ def _excitation(runs: Mapping[str, ScenarioRun], *, roams: bool) -> str:
             "below 10 Hz, as TQ §VI says, but raises it above 10 Hz, where most of our plant's "
             "5–30 s error lies (the firing ripple, the speed noise). More excitation from the "
             "plant does not change that: induction pulsation in ṁ_ai, even scaled 20×, leaves "
-            "(54) κ = 0.1 behind (50) (README, torque section)."
+            "(54) κ = 0.1 behind (50) (docs/estimators.md#torque-results)."
         )
     return text + (
         " (50) with ṁ_ai in kg/s and Γ = diag(0.1, 100) moves θ̂2 at the rate Γ2·ṁ_ai²/ℓ, "

@@ -17,9 +17,8 @@ import os
 import time
 from typing import Any
 
-from app.cli_service import ServiceCliError
-
-TERMINAL = ("succeeded", "failed", "cancelled", "interrupted")
+from app.cli.errors import UsageError
+from app.domain import FINISHED, RunStatus
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -49,7 +48,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--timeout", type=float, default=3600.0, help="seconds to wait for the runs")
     p.add_argument("--no-wait", action="store_true", help="print the sweep id and return")
     p.add_argument("--json", action="store_true", help="print the final sweep document")
-    p.set_defaults(handler=_cmd_sweep)
+    p.set_defaults(handler=run_command)
 
 
 def _value(raw: str) -> Any:
@@ -64,13 +63,13 @@ def _pairs(items: list[str], flag: str) -> list[tuple[str, str]]:
     for item in items:
         key, sep, raw = item.partition("=")
         if not sep or not key.strip() or not raw:
-            raise ServiceCliError(f"{flag} {item!r}: expected KEY=VALUE")
+            raise UsageError(f"{flag} {item!r}: expected KEY=VALUE")
         out.append((key.strip(), raw))
     return out
 
 
 def sweep_body(args: argparse.Namespace) -> dict[str, Any]:
-    from app.scenario_run import parse_set
+    from app.cli.run import parse_set
 
     parameters: dict[str, Any] = {}
     for key, raw in _pairs(args.grid, "--grid"):
@@ -80,11 +79,11 @@ def sweep_body(args: argparse.Namespace) -> dict[str, Any]:
         try:
             low, high = float(parts[0]), float(parts[1])
         except (ValueError, IndexError):
-            raise ServiceCliError(f"--range {key}={raw}: expected MIN:MAX[:log]") from None
+            raise UsageError(f"--range {key}={raw}: expected MIN:MAX[:log]") from None
         scale = parts[2] if len(parts) > 2 else "linear"
         parameters[key] = {"min": low, "max": high, "scale": scale}
     if not parameters:
-        raise ServiceCliError("give at least one --grid or --range")
+        raise UsageError("give at least one --grid or --range")
     signals = dict(_pairs(args.signal, "--signal"))
     if args.y:
         signals["y"] = args.y
@@ -104,7 +103,7 @@ def sweep_body(args: argparse.Namespace) -> dict[str, Any]:
             try:
                 axes.append({"name": name, "breakpoints": [float(v) for v in raw.split(",")]})
             except ValueError:
-                raise ServiceCliError(f"--axis {name}: breakpoints must be numbers") from None
+                raise UsageError(f"--axis {name}: breakpoints must be numbers") from None
         body["table"] = {"axes": axes}
     if args.samples is not None:
         body["samples"] = args.samples
@@ -113,7 +112,9 @@ def sweep_body(args: argparse.Namespace) -> dict[str, Any]:
     return body
 
 
-def _cmd_sweep(args: argparse.Namespace) -> int:
+def run_command(args: argparse.Namespace) -> int:
+    """``mapwise sweep``: create the sweep, wait for its runs, print the ranking; exit code 1
+    if a run did not succeed."""
     import httpx
 
     body = sweep_body(args)
@@ -126,20 +127,18 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
                 print(sweep["id"])
                 return 0
             deadline = time.monotonic() + args.timeout
-            while any(r["status"] not in TERMINAL for r in sweep["runs"]):
+            while any(r["status"] not in FINISHED for r in sweep["runs"]):
                 if time.monotonic() > deadline:
-                    raise ServiceCliError(
-                        f"sweep {sweep['id']} not finished after {args.timeout} s"
-                    )
+                    raise UsageError(f"sweep {sweep['id']} not finished after {args.timeout} s")
                 time.sleep(0.5)
                 sweep = _checked(client.get(f"/api/sweeps/{sweep['id']}"))
     except httpx.HTTPError as exc:
-        raise ServiceCliError(f"cannot reach the mapwise server at {args.url}: {exc}") from None
+        raise UsageError(f"cannot reach the mapwise server at {args.url}: {exc}") from None
     if args.json:
         print(json.dumps(sweep, indent=1))
     else:
         print(format_ranking(sweep))
-    return 0 if all(r["status"] == "succeeded" for r in sweep["runs"]) else 1
+    return 0 if all(r["status"] == RunStatus.SUCCEEDED for r in sweep["runs"]) else 1
 
 
 def _checked(response: Any) -> dict[str, Any]:
@@ -150,7 +149,7 @@ def _checked(response: Any) -> dict[str, Any]:
             message = f"{where}{error['message']}"
         except (ValueError, KeyError, TypeError):
             message = f"HTTP {response.status_code}"
-        raise ServiceCliError(message)
+        raise UsageError(message)
     return dict(response.json())
 
 
@@ -161,7 +160,7 @@ def format_ranking(sweep: dict[str, Any]) -> str:
     lines.append(f"{'rank':>4} {'run':>6} " + "".join(f"{k:>14}" for k in keys) + f" {metric:>14}")
     for i, run in enumerate(sweep["runs"], start=1):
         values = "".join(f"{_fmt((run['params'] or {}).get(k)):>14}" for k in keys)
-        value = _fmt(run["metric"]) if run["status"] == "succeeded" else run["status"]
+        value = _fmt(run["metric"]) if run["status"] == RunStatus.SUCCEEDED else run["status"]
         lines.append(f"{i:>4} {run['id']:>6} {values} {value:>14}")
     return "\n".join(lines)
 

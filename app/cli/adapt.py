@@ -1,17 +1,13 @@
 """``mapwise adapt``: learn a look-up table from a logged drive with one map filter.
 
-The JSON document it writes is a contract used by scripts outside the repository::
-
-    {"estimator", "axes": [{"name", "unit", "breakpoints"}], "values", "variance",
-     "samples", "rejected": {reason: count}, "timing": {"load_s", "estimate_s"}}
-
-``values`` and ``variance`` are nested lists in axis order (``variance`` is ``null`` for the
-covariance-free filters). Extra keys (``output``, ``accepted``, ``config``) may be added;
-existing ones never change.
+It prints (``--json``) or writes (``--out``) the map document of :mod:`app.io.map_json`, a
+contract used by scripts outside the repository.
 """
 
 from __future__ import annotations
 
+import argparse
+import json
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -19,20 +15,13 @@ from typing import Any
 
 import numpy as np
 
-from app.io.csv_files import read_csv
+from app.cli.errors import UsageError
+from app.io.map_json import map_document
 from estimation.errors import ConfigError
-from estimation.estimator import Snapshot, get_spec
+from estimation.registry import EstimatorKind, get_spec, names
 
-MAP_FILTERS = ("kf", "skf", "sskf", "rls", "nlms")
-
-# Which options each filter understands; anything else is a usage error, not silently ignored.
-_OPTIONS: dict[str, set[str]] = {
-    "kf": {"sigma_w", "sigma_v", "p0", "theta0", "limit", "sensor"},
-    "skf": {"sigma_w", "sigma_v", "p0", "theta0", "limit", "sensor"},
-    "sskf": {"sigma_w", "sigma_v", "theta0"},
-    "rls": {"sigma_v", "p0", "theta0", "limit", "forgetting"},
-    "nlms": {"sigma_v", "theta0", "mu"},
-}
+# The option flags and the config key each sets; a filter takes those its config model has,
+# and any other is a usage error, not silently ignored.
 _FLAGS = {
     "sigma_w": "--sigma-w",
     "sigma_v": "--sigma-v",
@@ -43,6 +32,82 @@ _FLAGS = {
     "forgetting": "--forgetting",
     "mu": "--mu",
 }
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "adapt",
+        help="learn a look-up table from a CSV log with a map-updating filter",
+        description="Learn a look-up table from a CSV log. --sigma-* are standard deviations "
+        "in the output's unit; --p0 is a variance.",
+    )
+    p.add_argument("input", type=Path, help="CSV log with a header row")
+    p.add_argument("--estimator", required=True, choices=names(EstimatorKind.MAP_FILTER))
+    p.add_argument(
+        "--axis",
+        action="append",
+        required=True,
+        metavar="NAME=B1,B2,...",
+        help="one per table dimension; NAME is an input column",
+    )
+    p.add_argument("--y", required=True, metavar="COLUMN", help="the measured table output")
+    p.add_argument("--sigma-w", type=float, help="random-walk σw per cell and sample")
+    p.add_argument("--sigma-v", type=float, help="measurement noise σv")
+    p.add_argument("--p0", type=float, help="initial variance of every cell")
+    p.add_argument("--theta0", type=float, help="initial value of every cell")
+    p.add_argument("--limit", choices=["none", "p0"], help="covariance limiting")
+    p.add_argument("--lag", type=float, help="sensor lag pole a (0 ≤ a < 1)")
+    p.add_argument("--delay-s", type=float, help="sensor delay in seconds (needs --time)")
+    p.add_argument("--delay-samples", type=int, help="sensor delay in samples")
+    p.add_argument("--sigma-f", type=float, help="process noise σf of the sensor state")
+    p.add_argument("--time", metavar="COLUMN", help="time column in seconds")
+    p.add_argument("--forgetting", type=float, help="RLS forgetting factor λ")
+    p.add_argument("--mu", type=float, help="NLMS step size μ")
+    p.add_argument("--lock", metavar="CELLS", help='locked cells, 0-based: "i,j;i,j"')
+    p.add_argument("--gate-sigma", type=float, help="reject samples with |e| > K·sqrt(s)")
+    p.add_argument("--out", type=Path, metavar="MAP.json", help="write the map document here")
+    p.add_argument("--json", action="store_true", help="print the map document on stdout")
+    p.set_defaults(handler=run_command)
+
+
+def run_command(args: argparse.Namespace) -> int:
+    """``mapwise adapt``: the map document to ``--out``, then the table (or JSON) on stdout."""
+    axes = [parse_axis(a) for a in args.axis]
+    options: dict[str, Any] = {
+        key: getattr(args, key)
+        for key in ("sigma_w", "sigma_v", "p0", "theta0", "limit", "forgetting", "mu")
+        if getattr(args, key) is not None
+    }
+    sensor_flags = {
+        "lag": args.lag,
+        "delay_s": args.delay_s,
+        "delay_samples": args.delay_samples,
+        "sigma_f": args.sigma_f,
+    }
+    if any(v is not None for v in sensor_flags.values()):
+        if args.lag is None:
+            raise UsageError("sensor dynamics need --lag A (with --delay-s or --delay-samples)")
+        sensor = {k: v for k, v in sensor_flags.items() if v is not None}
+        sensor.setdefault("delay_s", None)
+        options["sensor"] = sensor
+    request = AdaptRequest(
+        input=args.input,
+        estimator=args.estimator,
+        axes=axes,
+        output=args.y,
+        options=options,
+        locked=parse_cells(args.lock, len(axes)) if args.lock else [],
+        gate_sigma=args.gate_sigma,
+        time_column=args.time,
+    )
+    document = adapt(request)
+    if args.out is not None:
+        try:
+            args.out.write_text(json.dumps(document, indent=1) + "\n")
+        except OSError as exc:
+            raise UsageError(f"--out {args.out}: {exc.strerror}") from None
+    print(json.dumps(document) if args.json else format_table(document))
+    return 0
 
 
 @dataclass
@@ -99,7 +164,7 @@ def parse_cells(text: str, ndim: int) -> list[list[int]]:
 
 def build_config(request: AdaptRequest, units: dict[str, str]) -> dict[str, Any]:
     """The filter config dict of a request (units come from the log)."""
-    allowed = _OPTIONS[request.estimator]
+    allowed = set(_FLAGS) & set(get_spec(request.estimator).config_model.model_fields)
     for key in request.options:
         if key not in allowed:
             raise ConfigError(f"{_FLAGS[key]} does not apply to --estimator {request.estimator}")
@@ -118,9 +183,12 @@ def build_config(request: AdaptRequest, units: dict[str, str]) -> dict[str, Any]
 
 def adapt(request: AdaptRequest) -> dict[str, Any]:
     """Load the log, run the filter over it and return the contract document."""
+    from app.io.csv_files import read_csv
+
     spec = get_spec(request.estimator)
-    if request.estimator not in MAP_FILTERS:
-        raise ConfigError(f"--estimator must be one of {', '.join(MAP_FILTERS)}")
+    map_filters = names(EstimatorKind.MAP_FILTER)
+    if request.estimator not in map_filters:
+        raise ConfigError(f"--estimator must be one of {', '.join(map_filters)}")
     columns = [name for name, _ in request.axes] + [request.output]
     t0 = time.perf_counter()
     log = read_csv(request.input, columns=columns, time_column=request.time_column)
@@ -130,36 +198,9 @@ def adapt(request: AdaptRequest) -> dict[str, Any]:
         raise ConfigError("--delay-s needs a time column in seconds: pass --time COLUMN")
     estimator = spec.build(build_config(request, log.signals.units))
     t0 = time.perf_counter()
-    final = estimator.fit(log.signals)  # type: ignore[attr-defined]
+    final = estimator.fit(log.signals)
     estimate_s = time.perf_counter() - t0
     return map_document(final, samples=len(log.signals), load_s=load_s, estimate_s=estimate_s)
-
-
-def map_document(
-    snapshot: Snapshot, *, samples: int, load_s: float | None = None, estimate_s: float
-) -> dict[str, Any]:
-    """The ``mapwise adapt`` JSON document of a final snapshot."""
-    table = snapshot.table
-    assert table is not None
-    rejected = {k: int(v) for k, v in snapshot.rejected.items()}
-    timing = (
-        {"estimate_s": estimate_s}
-        if load_s is None
-        else {
-            "load_s": load_s,
-            "estimate_s": estimate_s,
-        }
-    )
-    return {
-        "estimator": snapshot.estimator,
-        "axes": [a.to_dict() for a in table.axes],
-        "values": table.values.tolist(),
-        "variance": None if snapshot.variance is None else snapshot.variance.tolist(),
-        "samples": samples,
-        "accepted": samples - sum(rejected.values()),
-        "rejected": rejected,
-        "timing": timing,
-    }
 
 
 def format_table(document: dict[str, Any]) -> str:

@@ -3,20 +3,23 @@
 With ``--json`` it prints (a contract)::
 
     {"scenario", "estimator", "seed", "config", "metrics": {...}, "timing": {"estimate_s"},
-     "map": <the mapwise adapt document>}        # "map" for map estimators only
+     "map": <the map document of app.io.map_json>}        # "map" for map estimators only
 
 Map metrics: ``rmse`` and ``max_abs_error`` against the true map on visited cells,
-``mean_relative_error`` (LPV §4 as defined in ALGORITHMS.md §3), ``coverage``; plus
+``mean_relative_error`` (LPV §4 as defined in docs/algorithms.md §3), ``coverage``; plus
 ``output_rmse``, the RMS of the measured minus predicted output over accepted samples.
 
 Where the scenario declares a true series that the estimator also outputs, it is scored too:
 the effective torque ``torque_nm`` by TQ (60)–(62) over 5–30 s (``ise``, ``mae``, ``sd``), any
 other series (e.g. the compressor flow ``w_c_kg_s`` of the EKF observers) by its ``rmse``,
 which then takes the ``rmse`` key (a map's own RMSE moves to ``map_rmse``).
+
+:func:`execute_scenario` is also what ``mapwise reproduce`` runs the papers' cases with.
 """
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import json
 import time
@@ -25,11 +28,55 @@ from typing import Any
 
 import numpy as np
 
-from app.adapt import map_document
+from app.io.map_json import map_document
+from app.services.overrides import merge
 from estimation.errors import ConfigError
-from estimation.estimator import Estimator, Snapshot, get_spec
-from estimation.metrics import map_metrics, output_metrics, torque_metrics
-from estimation.scenarios import ScenarioData, get_scenario
+from estimation.estimator import Estimator, Snapshot
+from estimation.metrics import score_run
+from estimation.registry import get_spec, names
+from estimation.scenarios import ScenarioData, get_scenario, scenarios
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "run",
+        help="run an estimator on a simulated scenario and score it against the truth",
+        description="Run any registered estimator on a named scenario and score it against the "
+        "truth. --set key=value reaches any config key (dotted keys for sections, values as "
+        "JSON), e.g. --set sigma_w=7 --set sensor.lag=0.9.",
+    )
+    p.add_argument(
+        "--scenario",
+        required=True,
+        help=f"scenario name: {', '.join(scenarios())} (mapwise simulate --list)",
+    )
+    p.add_argument("--estimator", required=True, help=f"estimator name: {', '.join(names())}")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--duration", type=float, help="simulate only the first S seconds")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    p.add_argument("--json", action="store_true", help="print the result document as JSON")
+    p.set_defaults(handler=run_command)
+
+
+def run_command(args: argparse.Namespace) -> int:
+    """``mapwise run``: the result document as JSON, or its metrics as text."""
+    result = run_scenario(
+        args.scenario,
+        args.estimator,
+        seed=args.seed,
+        overrides=parse_set(args.set),
+        duration_s=args.duration,
+    )
+    if args.json:
+        print(json.dumps(result))
+        return 0
+    print(
+        f"{result['estimator']} on {result['scenario']} (seed {result['seed']}), "
+        f"{result['timing']['estimate_s']:.3f} s"
+    )
+    for key, value in result["metrics"].items():
+        print(f"  {key:<22} {'n/a' if value is None else f'{value:.6g}'}")
+    return 0
 
 
 def parse_set(items: list[str]) -> dict[str, Any]:
@@ -56,17 +103,6 @@ def parse_set(items: list[str]) -> dict[str, Any]:
             node = child
         node[parts[-1]] = value
     return overrides
-
-
-def merge(base: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
-    """``base`` with ``overrides`` applied recursively (a ``null`` section removes it)."""
-    out = dict(base)
-    for key, value in overrides.items():
-        if isinstance(value, dict) and isinstance(out.get(key), dict):
-            out[key] = merge(out[key], value)
-        else:
-            out[key] = value
-    return out
 
 
 def run_scenario(
@@ -136,16 +172,8 @@ def execute_scenario(
         "timing": {"estimate_s": estimate_s},
     }
     if final.table is not None and data.true_map is not None:
-        metrics = map_metrics(final.table, data.true_map, data.scoring_points())
-        if data.scored_series:
-            metrics["map_rmse"] = metrics.pop("rmse")
-        residual = final.outputs.get("residual")
-        if residual is not None and final.status is not None:
-            metrics["output_rmse"] = output_metrics(residual[final.status == 0])["rmse"]
         result["map"] = map_document(final, samples=len(data.signals), estimate_s=estimate_s)
-    else:
-        metrics = {}
-    metrics |= series_metrics(data, final.outputs)
+    metrics = score_run(final.outputs, final.status, table=final.table, truth=data)
     result["metrics"] = {k: _finite_or_none(v) for k, v in metrics.items()}
     return ScenarioRun(result=result, data=data, final=final, history=history)
 
@@ -154,7 +182,7 @@ def _run_chunked(
     estimator: Estimator, data: ScenarioData, every: int | None
 ) -> tuple[Snapshot, tuple[Snapshot, ...]]:
     if every is None:
-        return estimator.fit(data.signals), ()  # type: ignore[attr-defined]
+        return estimator.fit(data.signals), ()
     snapshots = list(estimator.run(data.signals, every=every))
     last = snapshots[-1]
     outputs = {name: np.concatenate([s.outputs[name] for s in snapshots]) for name in last.outputs}
@@ -164,26 +192,6 @@ def _run_chunked(
     final = dataclasses.replace(last, chunk_start=0, outputs=outputs, status=status)
     history = tuple(dataclasses.replace(s, state=None, outputs={}, status=None) for s in snapshots)
     return final, history
-
-
-TORQUE_WINDOW_S = (5.0, 30.0)  # TQ §VI: indices over 5–30 s
-
-
-def series_metrics(data: ScenarioData, outputs: dict[str, np.ndarray]) -> dict[str, float]:
-    """Score every estimator output the scenario has a true series for."""
-    metrics: dict[str, float] = {}
-    for name, truth in data.scored_series.items():
-        estimate = outputs.get(name)
-        if estimate is None or estimate.shape != truth.shape:
-            continue
-        error = truth - estimate
-        if name == "torque_nm":
-            t = data.signals.time
-            window = (t[0] + TORQUE_WINDOW_S[0], min(t[0] + TORQUE_WINDOW_S[1], t[-1]))
-            metrics |= torque_metrics(t, error, window_s=window)
-        else:
-            metrics["rmse"] = output_metrics(error)["rmse"]
-    return metrics
 
 
 def _finite_or_none(value: float) -> float | None:

@@ -1,7 +1,7 @@
 """``mapwise serve``, ``mapwise db upgrade|current`` and ``mapwise token create|list|revoke``.
 
 Every problem (unreachable or out-of-date database, bad settings) is one line on stderr and
-exit code 2, raised as the CLI's usage error.
+exit code 2, raised as the CLI's :class:`~app.cli.errors.UsageError`.
 """
 
 from __future__ import annotations
@@ -11,11 +11,8 @@ from typing import Any
 
 from pydantic import ValidationError
 
+from app.cli.errors import UsageError
 from app.config import Settings
-
-
-class ServiceCliError(Exception):
-    """Reported by ``app.cli`` as ``mapwise: error: ...`` with exit code 2."""
 
 
 def _database_arg(parser: argparse.ArgumentParser) -> None:
@@ -82,15 +79,15 @@ def _settings(args: argparse.Namespace, **extra: Any) -> Settings:
     except ValidationError as exc:
         first = exc.errors()[0]
         where = ".".join(str(p) for p in first["loc"]) or "settings"
-        raise ServiceCliError(f"{where}: {first['msg'].removeprefix('Value error, ')}") from None
+        raise UsageError(f"{where}: {first['msg'].removeprefix('Value error, ')}") from None
 
 
-def _db_error(exc: Exception, url: str) -> ServiceCliError:
+def _db_error(exc: Exception, url: str) -> UsageError:
     from sqlalchemy.engine import make_url
 
     safe = make_url(url).render_as_string(hide_password=True) if "://" in url else url
     reason = str(getattr(exc, "orig", None) or exc).strip().splitlines()[0]
-    return ServiceCliError(f"cannot use the database {safe}: {reason}")
+    return UsageError(f"cannot use the database {safe}: {reason}")
 
 
 def _cmd_serve(args: argparse.Namespace) -> int:
@@ -124,7 +121,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
                     file=sys.stderr,
                 )
         elif check.state != "current":
-            raise ServiceCliError(check.message)
+            raise UsageError(check.message)
         if settings.auth_required and not _has_tokens(settings):
             print(
                 "mapwise: warning: authentication is required but no token exists; "
@@ -165,7 +162,7 @@ def _cmd_db_upgrade(args: argparse.Namespace) -> int:
     try:
         before = check_schema(settings.database_url)
         if before.state == "unknown":
-            raise ServiceCliError(before.message)
+            raise UsageError(before.message)
         upgrade(settings.database_url)
         after = check_schema(settings.database_url)
     except SQLAlchemyError as exc:
@@ -196,7 +193,7 @@ def _tokens(args: argparse.Namespace) -> Any:
     settings = _settings(args)
     check = check_schema(settings.database_url)
     if check.state != "current":
-        raise ServiceCliError(
+        raise UsageError(
             check.message
             if check.state != "empty"
             else "the database has no schema yet; "
@@ -231,6 +228,6 @@ def _cmd_token_revoke(args: argparse.Namespace) -> int:
     try:
         token = _tokens(args).revoke(args.id)
     except NotFoundError as exc:
-        raise ServiceCliError(exc.message) from None
+        raise UsageError(exc.message) from None
     print(f"token {token.id} ({token.name}) revoked")
     return 0

@@ -1,0 +1,103 @@
+"""Datasets: the logs, with their payload and truth blobs."""
+
+from __future__ import annotations
+
+from sqlalchemy import delete, func, select
+from sqlalchemy.orm import Session
+
+from app.db.models import DatasetRow, MapVersionRow, RunMetricRow, RunRow
+from app.db.repositories.base import from_row, valid_id
+from app.domain import Channel, Dataset, Page
+from app.errors import NotFoundError
+
+
+def _dataset(row: DatasetRow, has_truth: bool) -> Dataset:
+    return from_row(
+        Dataset,
+        row,
+        channels=[Channel(c["name"], c.get("unit", "")) for c in row.channels],
+        has_truth=has_truth,
+    )
+
+
+class DatasetRepo:
+    def __init__(self, session: Session) -> None:
+        self.s = session
+
+    def add(
+        self,
+        *,
+        name: str,
+        source: str,
+        rows: int,
+        rate_hz: float,
+        duration_s: float,
+        time_column: str,
+        channels: list[Channel],
+        payload: bytes,
+        scenario: str | None = None,
+        seed: int | None = None,
+        truth: bytes | None = None,
+    ) -> Dataset:
+        row = DatasetRow(
+            name=name,
+            source=source,
+            rows=rows,
+            rate_hz=rate_hz,
+            duration_s=duration_s,
+            time_column=time_column,
+            channels=[{"name": c.name, "unit": c.unit} for c in channels],
+            scenario=scenario,
+            seed=seed,
+            payload=payload,
+            truth=truth,
+        )
+        self.s.add(row)
+        self.s.flush()
+        return _dataset(row, truth is not None)
+
+    def _row(self, dataset_id: int) -> DatasetRow:
+        row = self.s.get(DatasetRow, dataset_id) if valid_id(dataset_id) else None
+        if row is None:
+            raise NotFoundError(f"dataset {dataset_id} does not exist", field="dataset_id")
+        return row
+
+    def get(self, dataset_id: int) -> Dataset:
+        row = self._row(dataset_id)
+        return _dataset(row, self._has_truth(dataset_id))
+
+    def _has_truth(self, dataset_id: int) -> bool:
+        q = select(DatasetRow.truth.is_not(None)).where(DatasetRow.id == dataset_id)
+        return bool(self.s.scalar(q))
+
+    def list(self, *, limit: int, offset: int) -> Page[Dataset]:
+        total = self.s.scalar(select(func.count()).select_from(DatasetRow)) or 0
+        q = (
+            select(DatasetRow, DatasetRow.truth.is_not(None))
+            .order_by(DatasetRow.id.desc())
+            .limit(limit)
+            .offset(offset)
+        )
+        items = [_dataset(row, bool(t)) for row, t in self.s.execute(q)]
+        return Page(items, total, limit, offset)
+
+    def payload(self, dataset_id: int) -> bytes:
+        blob = self.s.scalar(select(DatasetRow.payload).where(DatasetRow.id == dataset_id))
+        if blob is None:
+            raise NotFoundError(f"dataset {dataset_id} does not exist", field="dataset_id")
+        return blob
+
+    def truth(self, dataset_id: int) -> bytes | None:
+        return self.s.scalar(select(DatasetRow.truth).where(DatasetRow.id == dataset_id))
+
+    def run_count(self, dataset_id: int) -> int:
+        q = select(func.count()).select_from(RunRow).where(RunRow.dataset_id == dataset_id)
+        return self.s.scalar(q) or 0
+
+    def delete(self, dataset_id: int) -> None:
+        self._row(dataset_id)
+        run_ids = select(RunRow.id).where(RunRow.dataset_id == dataset_id)
+        self.s.execute(delete(RunMetricRow).where(RunMetricRow.run_id.in_(run_ids)))
+        self.s.execute(delete(MapVersionRow).where(MapVersionRow.run_id.in_(run_ids)))
+        self.s.execute(delete(RunRow).where(RunRow.dataset_id == dataset_id))
+        self.s.execute(delete(DatasetRow).where(DatasetRow.id == dataset_id))

@@ -1,0 +1,50 @@
+"""API bearer tokens (only their hashes are stored)."""
+
+from __future__ import annotations
+
+from sqlalchemy import select, update
+from sqlalchemy.orm import Session
+
+from app.db.models import ApiTokenRow, utcnow
+from app.db.repositories.base import from_row
+from app.domain import ApiToken
+from app.errors import NotFoundError
+
+
+def _token(row: ApiTokenRow) -> ApiToken:
+    return from_row(ApiToken, row)
+
+
+class TokenRepo:
+    def __init__(self, session: Session) -> None:
+        self.s = session
+
+    def add(self, *, name: str, prefix: str, token_hash: str) -> ApiToken:
+        row = ApiTokenRow(name=name, prefix=prefix, token_hash=token_hash)
+        self.s.add(row)
+        self.s.flush()
+        return _token(row)
+
+    def list(self) -> list[ApiToken]:
+        return [_token(r) for r in self.s.scalars(select(ApiTokenRow).order_by(ApiTokenRow.id))]
+
+    def revoke(self, token_id: int) -> ApiToken:
+        row = self.s.get(ApiTokenRow, token_id)
+        if row is None:
+            raise NotFoundError(f"token {token_id} does not exist", field="token_id")
+        if row.revoked_at is None:
+            row.revoked_at = utcnow()
+        self.s.flush()
+        return _token(row)
+
+    def active_by_hash(self, token_hash: str) -> ApiToken | None:
+        q = select(ApiTokenRow).where(
+            ApiTokenRow.token_hash == token_hash, ApiTokenRow.revoked_at.is_(None)
+        )
+        row = self.s.scalars(q).first()
+        return None if row is None else _token(row)
+
+    def touch(self, token_id: int) -> None:
+        self.s.execute(
+            update(ApiTokenRow).where(ApiTokenRow.id == token_id).values(last_used_at=utcnow())
+        )

@@ -1,0 +1,46 @@
+"""The map document: the JSON a finished map estimate is written as.
+
+``mapwise adapt`` and ``mapwise run`` print it, the service exports a run's map version as
+it (``GET /api/runs/{id}/export?format=json``) and :mod:`app.io.map_import` reads it back.
+It is a contract used by scripts outside the repository::
+
+    {"estimator", "axes": [{"name", "unit", "breakpoints"}], "values", "variance",
+     "samples", "rejected": {reason: count}, "timing": {"load_s", "estimate_s"}}
+
+``values`` and ``variance`` are nested lists in axis order (``variance`` is ``null`` for the
+covariance-free filters). Extra keys (``output``, ``accepted``, ``config``) may be added;
+existing ones never change.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from estimation.estimator import Snapshot
+
+
+def map_document(
+    snapshot: Snapshot, *, samples: int, load_s: float | None = None, estimate_s: float
+) -> dict[str, Any]:
+    """The map document of a final snapshot (``timing.load_s`` only when ``load_s`` is given)."""
+    table = snapshot.table
+    assert table is not None
+    rejected = {k: int(v) for k, v in snapshot.rejected.items()}
+    timing = (
+        {"estimate_s": estimate_s}
+        if load_s is None
+        else {
+            "load_s": load_s,
+            "estimate_s": estimate_s,
+        }
+    )
+    return {
+        "estimator": snapshot.estimator,
+        "axes": [a.to_dict() for a in table.axes],
+        "values": table.values.tolist(),
+        "variance": None if snapshot.variance is None else snapshot.variance.tolist(),
+        "samples": samples,
+        "accepted": samples - sum(rejected.values()),
+        "rejected": rejected,
+        "timing": timing,
+    }
