@@ -4,14 +4,38 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from datetime import datetime
+from enum import StrEnum
 from typing import Any, Generic, TypeVar
 
 import numpy as np
 
 T = TypeVar("T")
 
-RUN_STATUSES = ("queued", "running", "succeeded", "failed", "cancelled", "interrupted")
-FINISHED = ("succeeded", "failed", "cancelled", "interrupted")
+
+class RunStatus(StrEnum):
+    """A run's status; the values are what the database and the JSON carry."""
+
+    QUEUED = "queued"
+    RUNNING = "running"
+    SUCCEEDED = "succeeded"
+    FAILED = "failed"
+    CANCELLED = "cancelled"
+    INTERRUPTED = "interrupted"
+
+
+FINISHED = (RunStatus.SUCCEEDED, RunStatus.FAILED, RunStatus.CANCELLED, RunStatus.INTERRUPTED)
+RESUMABLE = (RunStatus.INTERRUPTED, RunStatus.CANCELLED)
+
+
+class SeriesRole(StrEnum):
+    """What a result series is: an operating-point input channel, the measured output, an
+    estimator output (estimate), a simulated truth, or the error truth − estimate."""
+
+    INPUT = "input"
+    MEASURED = "measured"
+    OUTPUT = "output"
+    TRUTH = "truth"
+    ERROR = "error"
 
 
 @dataclass(frozen=True, slots=True)
@@ -48,7 +72,7 @@ class Run:
     dataset_id: int
     name: str
     estimator: str
-    status: str
+    status: RunStatus
     progress: float
     sample: int
     n_samples: int
@@ -130,10 +154,15 @@ class ResumePoint:
 
 @dataclass(frozen=True, slots=True)
 class Series:
+    """A result series. ``name`` is its key, unique within the run (the channel or output
+    name, qualified as ``role:name`` only where two roles share a name); ``role`` is ``None``
+    for a series stored before roles were recorded."""
+
     name: str
     unit: str
     time: np.ndarray
     values: np.ndarray
+    role: SeriesRole | None = None
 
 
 @dataclass(frozen=True, slots=True)

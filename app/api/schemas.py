@@ -10,8 +10,8 @@ from typing import Any, Generic, Literal, TypeVar
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from app.domain import BaseMap, Dataset, MapVersion, Run, VersionSummary
-from app.services.decimate import nested_or_none
+from app.domain import BaseMap, Dataset, MapVersion, Run, RunStatus, SeriesRole, VersionSummary
+from app.io.decimate import nested_or_none
 
 T = TypeVar("T")
 
@@ -113,7 +113,7 @@ class RunOut(BaseModel):
     dataset_id: int
     estimator: str
     name: str
-    status: Literal["queued", "running", "succeeded", "failed", "cancelled", "interrupted"]
+    status: RunStatus
     progress: float
     sample: int
     n_samples: int
@@ -226,6 +226,11 @@ class LabelIn(BaseModel):
 
 class SeriesLine(BaseModel):
     unit: str
+    role: SeriesRole | None = Field(
+        None,
+        description="input, measured, output (an estimate), truth or error; null for a "
+        "series stored before roles were recorded.",
+    )
     values: list[float | None]
 
 

@@ -42,7 +42,7 @@ class IngestLimits:
 
 
 @dataclass(frozen=True, slots=True)
-class Dataset:
+class ParsedLog:
     """A validated log: ``signals`` (time in s, float64 channels with units) and provenance."""
 
     signals: Signals
@@ -95,7 +95,7 @@ def ingest(
     units: Mapping[str, str] | None = None,
     time_column: str | None = None,
     limits: IngestLimits | None = None,
-) -> Dataset:
+) -> ParsedLog:
     """Parse and validate an uploaded log.
 
     ``source``: the file's bytes, a binary file object (read from its current position), or
@@ -131,7 +131,7 @@ def ingest(
             max_channels=limits.max_channels,
         )
     _check_shape(signals, limits)
-    return Dataset(signals, kind, used_time, tuple(notes))
+    return ParsedLog(signals, kind, used_time, tuple(notes))
 
 
 def _read_bounded(

@@ -1,6 +1,6 @@
 """Import a starting map (e.g. the production calibration) from JSON, CSV or DCM.
 
-- JSON: the ``mapwise adapt`` map document (:func:`app.adapt.map_document`) or any object
+- JSON: the ``mapwise adapt`` map document (:func:`app.io.map_json.map_document`) or any object
   with ``axes: [{"name", "unit", "breakpoints"}]`` and nested ``values``.
 - CSV: the grid layout of :func:`app.io.export.map_to_csv` (corner ``row axis [unit] \\
   column axis [unit]``), or two columns for a 1-D map; delimiter ``, ; tab`` sniffed.

@@ -25,6 +25,8 @@ from typing import Any
 from app.config import Settings
 from app.db.engine import Database
 from app.db.repositories import RunRepo
+from app.domain import RunStatus
+from app.runs.frames import StatusFrame
 from app.runs.hub import LiveHub
 from app.runs.lost_runs import ExecutorBase
 from app.runs.worker import WorkerContext, database, execute_run
@@ -50,16 +52,16 @@ def execute_on_dask(run_id: int, context: WorkerContext, max_lost: int) -> str:
     db = database(context.database_url)
     with db.write() as s:
         runs = RunRepo(s)
-        if runs.get(run_id).status == "running":  # this task ran before, on a lost worker
+        if runs.get(run_id).status == RunStatus.RUNNING:  # this task ran before, on a lost worker
             status = runs.lose_attempt(
                 run_id,
                 reason="its Dask worker was lost (killed or out of memory)",
                 requeue=True,
                 max_lost=max_lost,
             )
-            if status == "failed":
-                publish({"kind": "status", "run_id": run_id, "status": "failed", "error": None})
-                return "failed"
+            if status == RunStatus.FAILED:
+                publish(StatusFrame(run_id, RunStatus.FAILED).to_message())
+                return RunStatus.FAILED
     return execute_run(run_id, context, publish)
 
 
@@ -82,7 +84,7 @@ class DaskExecutor(ExecutorBase):
         self._client.subscribe_topic(LIVE_TOPIC, self._on_event)
         self.sweep()
         with self.db.read() as s:
-            queued = RunRepo(s).ids_with_status("queued")
+            queued = RunRepo(s).ids_with_status(RunStatus.QUEUED)
         for run_id in queued:  # submitted again: a claim lets only one execution through
             self.submit(run_id)
         self._start_sweeper()

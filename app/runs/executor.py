@@ -31,9 +31,11 @@ from typing import Any, Protocol
 from app.config import Settings
 from app.db.engine import Database
 from app.db.repositories import RunRepo
+from app.domain import RunStatus
+from app.runs.frames import StatusFrame
 from app.runs.hub import LiveHub
 from app.runs.lost_runs import ExecutorBase
-from app.runs.worker import execute_in_pool, init_pool_worker, warm_up
+from app.runs.pool import execute_in_pool, init_pool_worker, warm_up
 
 log = logging.getLogger("mapwise.runs")
 SHUTDOWN_WAIT_S = 15.0
@@ -94,7 +96,7 @@ class RunExecutor(ExecutorBase):
             self.lose(run_id, None, "the server stopped while the run was executing")
         self.sweep()
         with self.db.read() as s:
-            queued = RunRepo(s).ids_with_status("queued")
+            queued = RunRepo(s).ids_with_status(RunStatus.QUEUED)
         for run_id in queued:
             self.submit(run_id)
         self._start_sweeper()
@@ -172,14 +174,16 @@ class RunExecutor(ExecutorBase):
             try:
                 with self.db.write() as s:
                     changed = RunRepo(s).set_status(
-                        run_id, "failed", only_if=("running",), error=message, finished=True
+                        run_id,
+                        RunStatus.FAILED,
+                        only_if=(RunStatus.RUNNING,),
+                        error=message,
+                        finished=True,
                     )
             except Exception:  # the database may be gone at shutdown
                 return
             if changed:
-                self._deliver(
-                    {"kind": "status", "run_id": run_id, "status": "failed", "error": message}
-                )
+                self._deliver(StatusFrame(run_id, RunStatus.FAILED, message).to_message())
             return
         # A dead worker process (killed, out of memory) takes the whole pool with it: its
         # runs lost their attempt; a run the dead pool never started is simply queued again.
@@ -189,7 +193,7 @@ class RunExecutor(ExecutorBase):
                     self._pool = self._new_pool()
         try:
             with self.db.read() as s:
-                never_started = RunRepo(s).get(run_id).status == "queued"
+                never_started = RunRepo(s).get(run_id).status == RunStatus.QUEUED
         except Exception:
             return
         if never_started:

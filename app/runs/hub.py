@@ -15,15 +15,17 @@ import json
 from dataclasses import dataclass, field
 from typing import Any
 
+from app.domain import FINISHED, RunStatus
+from app.runs.frames import StartMessage, StatusFrame, TickMessage, parse_message
+
 MAX_POINTS = 4000
 VIEWER_QUEUE = 8
-TERMINAL = ("succeeded", "failed", "cancelled", "interrupted")
 
 
 @dataclass
 class LiveState:
     run_id: int
-    status: str = "running"
+    status: str = RunStatus.RUNNING
     error: str | None = None
     progress: float = 0.0
     sample: int = 0
@@ -36,6 +38,7 @@ class LiveState:
     metrics: dict[str, Any] = field(default_factory=dict)
     rejected: dict[str, int] = field(default_factory=dict)
     units: dict[str, str] = field(default_factory=dict)
+    roles: dict[str, str] = field(default_factory=dict)
     trajectory_time: list[float | None] = field(default_factory=list)
     trajectory_points: list[list[float]] = field(default_factory=list)
     series: dict[str, dict[str, list[Any]]] = field(default_factory=dict)
@@ -126,82 +129,58 @@ class LiveHub:
 
     def handle(self, message: dict[str, Any]) -> None:
         """A worker message (``start``, ``tick`` or ``status``); called on the event loop."""
-        kind, run_id = message.get("kind"), int(message["run_id"])
         self.frames_in += 1
-        if kind == "start":
-            self.live[run_id] = LiveState(
-                run_id=run_id,
-                axes=message.get("axes"),
-                n_samples=int(message.get("n_samples", 0)),
-                units=dict(message.get("units", {})),
+        parsed = parse_message(message)
+        if isinstance(parsed, StartMessage):
+            self.live[parsed.run_id] = LiveState(
+                run_id=parsed.run_id,
+                axes=parsed.axes,
+                n_samples=parsed.n_samples,
+                units=dict(parsed.units),
+                roles=dict(parsed.roles),
             )
-            self._broadcast_resync(run_id)
-        elif kind == "tick":
-            self._tick(run_id, message)
-        elif kind == "status":
-            self._status(run_id, message)
+            self._broadcast_resync(parsed.run_id)
+        elif isinstance(parsed, TickMessage):
+            self._tick(parsed)
+        elif isinstance(parsed, StatusFrame):
+            self._status(parsed)
 
-    def _tick(self, run_id: int, message: dict[str, Any]) -> None:
+    def _tick(self, tick: TickMessage) -> None:
+        run_id = tick.run_id
         state = self.live.get(run_id)
         if state is None:
             state = self.live[run_id] = LiveState(run_id=run_id)
-        gap = state.seq and message["seq"] != state.seq + 1
-        state.seq = message["seq"]
-        for key in (
-            "sample",
-            "n_samples",
-            "progress",
-            "values",
-            "variances",
-            "visits",
-            "active_cell",
-            "metrics",
-            "rejected",
-        ):
-            setattr(state, key, message.get(key))
-        state.add_points(message.get("trajectory", {}), message.get("series", {}))
+        gap = state.seq and tick.seq != state.seq + 1
+        state.seq = tick.seq
+        state.sample, state.n_samples, state.progress = tick.sample, tick.n_samples, tick.progress
+        state.values, state.variances, state.visits = tick.values, tick.variances, tick.visits
+        state.active_cell, state.metrics = tick.active_cell, tick.metrics
+        state.rejected = tick.rejected
+        state.add_points(tick.trajectory, tick.series)
         if gap:
             self._broadcast_resync(run_id)
             return
-        delta = {
-            "type": "delta",
-            "sample": message["sample"],
-            "progress": message["progress"],
-            "time_s": message.get("time_s"),
-            "emitted_at": message.get("emitted_at"),
-            "values": message.get("values"),
-            "variances": message.get("variances"),
-            "visits": message.get("visits"),
-            "active_cell": message.get("active_cell"),
-            "trajectory": message.get("trajectory", {"time": [], "points": []}),
-            "series": message.get("series", {}),
-            "metrics": message.get("metrics", {}),
-            "rejected": message.get("rejected", {}),
-        }
         viewers = self.viewers.get(run_id, ())
         if viewers:
-            text = json.dumps(delta, separators=(",", ":"))  # encoded once for every viewer
+            text = _encode(tick.delta().to_json())  # encoded once for every viewer
             for viewer in viewers:
                 viewer.offer(text)
                 self.frames_out += 1
 
-    def _status(self, run_id: int, message: dict[str, Any]) -> None:
-        status = message["status"]
-        state = self.live.get(run_id)
+    def _status(self, frame: StatusFrame) -> None:
+        state = self.live.get(frame.run_id)
         if state is not None:
-            state.status, state.error = status, message.get("error")
-        out = {
-            "type": "status",
-            "status": status,
-            "error": message.get("error"),
-            "progress": message.get("progress", 0.0),
-        }
-        text = json.dumps(out, separators=(",", ":"))
-        for viewer in self.viewers.get(run_id, ()):
+            state.status, state.error = frame.status, frame.error
+        text = _encode(frame.to_json())
+        for viewer in self.viewers.get(frame.run_id, ()):
             viewer.offer(text)
-        if status in TERMINAL:
-            self.live.pop(run_id, None)
+        if frame.status in FINISHED:
+            self.live.pop(frame.run_id, None)
 
     def _broadcast_resync(self, run_id: int) -> None:
         for viewer in self.viewers.get(run_id, ()):
             viewer.resync()
+
+
+def _encode(frame: dict[str, Any]) -> str:
+    return json.dumps(frame, separators=(",", ":"))

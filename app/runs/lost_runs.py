@@ -15,6 +15,8 @@ from typing import Any
 from app.config import Settings
 from app.db.engine import Database
 from app.db.repositories import RunRepo
+from app.domain import RunStatus
+from app.runs.frames import StatusFrame
 from app.runs.hub import LiveHub
 from app.runs.worker import WorkerContext
 
@@ -68,8 +70,8 @@ class ExecutorBase:
         if status is None:
             return
         log.warning("run %s lost its attempt (%s): now %s", run_id, reason, status)
-        self._deliver({"kind": "status", "run_id": run_id, "status": status, "error": error})
-        if status == "queued" and not self._stopping.is_set():
+        self._deliver(StatusFrame(run_id, status, error).to_message())
+        if status == RunStatus.QUEUED and not self._stopping.is_set():
             self.submit(run_id)
 
     def sweep(self) -> list[int]:

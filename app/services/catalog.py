@@ -15,8 +15,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel
 
-from estimation.estimator import EstimatorSpec, registry
-from estimation.filters.config import TableFilterConfig
+from estimation.registry import EstimatorKind, EstimatorSpec, registry
 from estimation.scenarios import scenarios
 
 Kind = Literal["table-filter", "maf-observer", "torque"]
@@ -38,9 +37,9 @@ class Role:
 
 
 def kind_of(spec: EstimatorSpec) -> Kind:
-    if issubclass(spec.config_model, TableFilterConfig):
+    if spec.kind == EstimatorKind.MAP_FILTER:
         return "table-filter"
-    if not spec.produces_map and "torque" in spec.config_model.__module__:
+    if spec.kind == EstimatorKind.TORQUE:
         return "torque"
     return "maf-observer"
 

@@ -8,22 +8,20 @@ keeps its truth (true map, scoring points, true series) for the run metrics.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
 from typing import Any, BinaryIO
 
 import numpy as np
 
-from app.db import blobs
 from app.db.engine import Database
 from app.db.repositories import DatasetRepo, RunRepo
-from app.domain import Channel, Dataset, Page
+from app.domain import Channel, Dataset, Page, RunStatus
 from app.errors import ConflictError, InvalidRequestError
+from app.io.decimate import finite_or_none, minmax_decimate
 from app.io.ingest import IngestLimits, ingest
-from app.services.decimate import finite_or_none, minmax_decimate
+from app.io.payload import pack_signals, pack_truth, unpack_signals
 from estimation.errors import ConfigError
-from estimation.scenarios import ScenarioData, get_scenario, scenarios
+from estimation.scenarios import get_scenario, scenarios
 from estimation.signals import Signals
-from estimation.table import Table
 
 NAME_MAX = 200
 
@@ -33,75 +31,6 @@ def _clean_name(name: str | None, fallback: str) -> str:
     text = (name or "").replace("\\", "/").rsplit("/", 1)[-1].strip()
     text = "".join(ch for ch in text if ch.isprintable())
     return (text or fallback)[:NAME_MAX]
-
-
-def pack_signals(signals: Signals) -> bytes:
-    arrays = {"time": signals.time}
-    arrays |= {f"c{i}": signals[name] for i, name in enumerate(signals.names)}
-    return blobs.pack(arrays)
-
-
-def unpack_signals(blob: bytes, channels: list[Channel]) -> Signals:
-    arrays = blobs.unpack(blob)
-    return Signals(
-        arrays["time"],
-        {c.name: arrays[f"c{i}"] for i, c in enumerate(channels)},
-        {c.name: c.unit for c in channels},
-    )
-
-
-@dataclass(frozen=True, slots=True)
-class Truth:
-    """What a simulated dataset knows that a log does not (see :class:`ScenarioData`)."""
-
-    true_map: Table | None
-    map_inputs: tuple[str, ...]
-    map_output: str | None
-    map_points: np.ndarray | None
-    scored_series: dict[str, np.ndarray]
-
-    def scenario_data(self, scenario: str, seed: int, signals: Signals) -> ScenarioData:
-        return ScenarioData(
-            scenario=scenario,
-            seed=seed,
-            signals=signals,
-            truth={},
-            true_map=self.true_map,
-            map_inputs=self.map_inputs,
-            map_output=self.map_output,
-            map_points=self.map_points,
-            scored_series=self.scored_series,
-        )
-
-
-def pack_truth(data: ScenarioData) -> bytes:
-    names = list(data.scored_series)
-    true_map = data.true_map
-    meta: dict[str, Any] = {
-        "true_map_axes": None if true_map is None else [a.to_dict() for a in true_map.axes],
-        "map_inputs": list(data.map_inputs),
-        "map_output": data.map_output,
-        "scored": names,
-    }
-    arrays: dict[str, np.ndarray] = {f"s{i}": data.scored_series[n] for i, n in enumerate(names)}
-    if data.true_map is not None:
-        arrays["true_map"] = data.true_map.values
-        arrays["map_points"] = data.scoring_points()
-    return blobs.pack_meta(arrays, meta)
-
-
-def unpack_truth(blob: bytes) -> Truth:
-    arrays, meta = blobs.unpack_meta(blob)
-    true_map = None
-    if meta["true_map_axes"] is not None:
-        true_map = Table.from_dict({"axes": meta["true_map_axes"], "values": arrays["true_map"]})
-    return Truth(
-        true_map=true_map,
-        map_inputs=tuple(meta["map_inputs"]),
-        map_output=meta["map_output"],
-        map_points=arrays.get("map_points"),
-        scored_series={n: arrays[f"s{i}"] for i, n in enumerate(meta["scored"])},
-    )
 
 
 class DatasetService:
@@ -192,7 +121,7 @@ class DatasetService:
                 active = [
                     r.id
                     for r in RunRepo(s).list(limit=1_000_000, offset=0, dataset_id=dataset_id).items
-                    if r.status in ("queued", "running")
+                    if r.status in (RunStatus.QUEUED, RunStatus.RUNNING)
                 ]
                 if active:
                     raise ConflictError(

@@ -20,13 +20,13 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from app.domain import BaseMap, Dataset
 from app.errors import InvalidRequestError, field_of
 from app.io.columns import same_unit
+from app.runs.options import run_options
 from app.services.catalog import TABLE_ROLE, kind_of, needs_table, roles
 from estimation.errors import ConfigError, EstimationError
-from estimation.estimator import EstimatorSpec, registry
+from estimation.registry import EstimatorSpec, registry
 from estimation.table import Axis, Grid, broadcast_cells
 
 SERVICE_KEYS = ("pace", "version_every", "gates", "locked")
-MAX_VERSIONS = 1000  # persisted versions per run (each carries the map and estimator state)
 
 
 class AxisSpec(BaseModel):
@@ -63,15 +63,6 @@ class RunRequest(BaseModel):
 
 
 @dataclass(frozen=True, slots=True)
-class RunOptions:
-    """Service-level settings of a run (not the estimator's)."""
-
-    pace: float | None  # real-time multiple; None: as fast as possible
-    version_every: int  # samples between persisted map versions
-    gates: list[dict[str, Any]]
-
-
-@dataclass(frozen=True, slots=True)
 class RunPlan:
     estimator: str
     estimator_config: dict[str, Any]
@@ -90,60 +81,6 @@ def _spec(name: str) -> EstimatorSpec:
             f"unknown estimator {name!r}; choose one of {sorted(specs)}", field="estimator"
         )
     return specs[name]
-
-
-def run_options(config: dict[str, Any], rows: int, rate_hz: float, fraction: float) -> RunOptions:
-    """Parse the service keys of a run config (validated again by every worker)."""
-    pace_raw = config.get("pace", "max")
-    if pace_raw == "max" or pace_raw is None:
-        pace = None
-    elif isinstance(pace_raw, int | float) and not isinstance(pace_raw, bool):
-        if not (math.isfinite(pace_raw) and pace_raw > 0):
-            raise InvalidRequestError(
-                f"pace must be 'max' or a positive real-time multiple, got {pace_raw!r}",
-                field="config.pace",
-            )
-        pace = float(pace_raw)
-    else:
-        raise InvalidRequestError(
-            f"pace must be 'max' or a positive real-time multiple, got {pace_raw!r}",
-            field="config.pace",
-        )
-    every_raw = config.get("version_every")
-    if every_raw is None:
-        every = max(1, math.ceil(rows * fraction))
-    elif isinstance(every_raw, dict) and set(every_raw) == {"samples"}:
-        n = every_raw["samples"]
-        if not isinstance(n, int) or isinstance(n, bool) or n < 1:
-            raise InvalidRequestError(
-                f"version_every.samples must be an integer >= 1, got {n!r}",
-                field="config.version_every.samples",
-            )
-        every = n
-    elif isinstance(every_raw, dict) and set(every_raw) == {"seconds"}:
-        sec = every_raw["seconds"]
-        if not isinstance(sec, int | float) or isinstance(sec, bool) or not sec > 0:
-            raise InvalidRequestError(
-                f"version_every.seconds must be > 0, got {sec!r}",
-                field="config.version_every.seconds",
-            )
-        every = max(1, round(sec * rate_hz))
-    else:
-        raise InvalidRequestError(
-            'version_every must be {"samples": N} or {"seconds": S}',
-            field="config.version_every",
-        )
-    if math.ceil(rows / every) > MAX_VERSIONS:
-        raise InvalidRequestError(
-            f"a version every {every} samples gives {math.ceil(rows / every)} versions of this "
-            f"{rows}-sample log; at most {MAX_VERSIONS} per run (every >= "
-            f"{math.ceil(rows / MAX_VERSIONS)} samples)",
-            field="config.version_every",
-        )
-    gates = config.get("gates") or []
-    if not isinstance(gates, list):
-        raise InvalidRequestError("gates must be a list of gate objects", field="config.gates")
-    return RunOptions(pace=pace, version_every=every, gates=gates)
 
 
 def _check_column(dataset: Dataset, column: str, field: str) -> None:
@@ -278,7 +215,7 @@ def plan_run(
                 field="config.gates",
             )
     if options.gates:
-        from app.services.gates import parse_gates
+        from app.runs.gates import parse_gates
 
         parse_gates(options.gates, [c.name for c in dataset.channels], field="config.gates")
     model = _validate_config(spec, estimator_config)

@@ -9,21 +9,30 @@ from typing import Any, Protocol
 import numpy as np
 from sqlalchemy.orm import Session
 
-from app.adapt import map_document
 from app.config import Settings
 from app.db.engine import Database
 from app.db.repositories import BaseMapRepo, DatasetRepo, MetricRepo, RunRepo, VersionRepo
-from app.domain import MapVersion, Page, Run, Series, VersionSummary
+from app.domain import (
+    RESUMABLE,
+    MapVersion,
+    Page,
+    Run,
+    RunStatus,
+    Series,
+    SeriesRole,
+    VersionSummary,
+)
 from app.errors import ConflictError, InvalidRequestError
-from app.services.datasets import unpack_signals
-from app.services.decimate import stride_decimate
+from app.io.decimate import stride_decimate
+from app.io.map_json import map_document
+from app.io.payload import unpack_signals
+from app.runs.frames import StatusFrame
 from app.services.run_plan import RunRequest, plan_run
 from estimation.estimator import Snapshot
 from estimation.signals import Signals
 from estimation.table import Axis, Table
 
 EXPORT_FORMATS = ("json", "csv", "mcap", "dcm")
-RESUMABLE = ("interrupted", "cancelled")
 
 
 class Submitter(Protocol):
@@ -113,7 +122,7 @@ class RunService:
             return RunRepo(s).get(run_id)
 
     def list(
-        self, *, limit: int, offset: int, dataset_id: int | None, status: str | None
+        self, *, limit: int, offset: int, dataset_id: int | None, status: RunStatus | None
     ) -> Page[Run]:
         with self.db.read() as s:
             return RunRepo(s).list(limit=limit, offset=offset, dataset_id=dataset_id, status=status)
@@ -124,16 +133,16 @@ class RunService:
             run = runs.get(run_id)
             if run.finished:
                 raise ConflictError(f"run {run_id} is already {run.status}", field="run_id")
-            if run.status == "queued":
-                runs.set_status(run_id, "cancelled", only_if=("queued",), finished=True)
+            if run.status == RunStatus.QUEUED:
+                runs.set_status(
+                    run_id, RunStatus.CANCELLED, only_if=(RunStatus.QUEUED,), finished=True
+                )
                 cancelled_queued = True
             else:
                 runs.request_stop(run_id, "cancel")
                 cancelled_queued = False
         if cancelled_queued and self.executor is not None:
-            self.executor.deliver_local(
-                {"kind": "status", "run_id": run_id, "status": "cancelled", "error": None}
-            )
+            self.executor.deliver_local(StatusFrame(run_id, RunStatus.CANCELLED).to_message())
         return self.get(run_id)
 
     def resume(self, run_id: int) -> Run:
@@ -148,9 +157,7 @@ class RunService:
             runs.reset_for_resume(run_id)
         self.submit(run_id)
         if self.executor is not None:
-            self.executor.deliver_local(
-                {"kind": "status", "run_id": run_id, "status": "queued", "error": None}
-            )
+            self.executor.deliver_local(StatusFrame(run_id, RunStatus.QUEUED).to_message())
         return self.get(run_id)
 
     # -- versions -------------------------------------------------------------------------------
@@ -184,7 +191,9 @@ class RunService:
             return np.empty(0), []
         time = stored[0].time
         index = stride_decimate(time.size, points)
-        return time[index], [Series(x.name, x.unit, x.time[index], x.values[index]) for x in stored]
+        return time[index], [
+            Series(x.name, x.unit, x.time[index], x.values[index], x.role) for x in stored
+        ]
 
     def cells(self, run_id: int) -> MapVersion | None:
         return self.latest_version(run_id)
@@ -287,9 +296,11 @@ class RunService:
         channels = {name: signals[name][start:] for name in names}
         units = {name: signals.units[name] for name in names}
         for name, values in full.items():
-            if name not in channels and np.all(np.isfinite(values[start:])):
-                channels[name] = values[start:]
-                units[name] = ""
+            if np.all(np.isfinite(values[start:])):
+                # an estimate named like an input channel (the EKF's p_im_pa) keeps both
+                key = name if name not in channels else f"{SeriesRole.OUTPUT}:{name}"
+                channels[key] = values[start:]
+                units[key] = ""
         return Signals(signals.time[start:], channels, units)
 
     def _mcap(self, run: Run) -> bytes:

@@ -23,9 +23,9 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from app.db.engine import Database
 from app.db.repositories import GroupRepo, RunRepo, VersionRepo
-from app.domain import Page, Run, RunGroup
+from app.domain import Page, Run, RunGroup, RunStatus
 from app.errors import AppError, InvalidRequestError
-from app.scenario_run import merge
+from app.services.overrides import merge
 from app.services.run_plan import RunRequest, TableSpec
 from app.services.runs import RunService
 from estimation.errors import EstimationError
@@ -252,7 +252,7 @@ class SweepService:
         with self.db.read() as s:
             GroupRepo(s).get(group_id, "batch")
             runs = RunRepo(s).in_group(group_id)
-            if not runs or any(r.status != "succeeded" or not r.produces_map for r in runs):
+            if not runs or any(r.status != RunStatus.SUCCEEDED or not r.produces_map for r in runs):
                 return None
             versions = [VersionRepo(s).latest(r.id) for r in runs]
         if any(v is None or v.values is None for v in versions):

@@ -5,11 +5,13 @@
 import { SERIES_CAP } from "./constants.js";
 
 /**
- * The series names the worker sends (app/runs/worker.py, `_lines`, streamed by `_tick`): the
+ * The series names the worker sends (app/runs/results.py, `RunResults.lines`, streamed by
+ * app/runs/live.py; each line's role in full frames and REST /series): the
  * operating-point channels under their own names, "measured" (a table filter's output column),
  * the estimator's outputs ("prediction" and "residual" for table filters; "torque_nm", "theta1",
  * "theta2" and "pe_lambda_min" for torque estimators; an observer's states, e.g. "w_c_kg_s"),
  * and for every output scored against a simulated truth NAME_true and NAME_error (true − NAME).
+ * An output named like an input channel comes as "output:NAME" (the EKF's p_im_pa).
  */
 export const SERIES = Object.freeze({
   measured: "measured",

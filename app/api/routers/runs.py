@@ -22,15 +22,16 @@ from app.api.schemas import (
     VersionOut,
     VersionSummaryOut,
 )
+from app.domain import RunStatus
 from app.errors import InvalidRequestError
-from app.services.decimate import finite_or_none, nested_or_none
-from app.services.run_plan import MAX_VERSIONS, RunRequest
+from app.io.decimate import finite_or_none, nested_or_none
+from app.runs.options import MAX_VERSIONS
+from app.services.run_plan import RunRequest
 
 router = APIRouter(tags=["runs"], responses=ERRORS)
 
 Limit = Annotated[int, Query(ge=1, le=500)]
 Offset = Annotated[int, Query(ge=0, le=MAX_ID)]
-Status = Literal["queued", "running", "succeeded", "failed", "cancelled", "interrupted"]
 
 
 @router.post("/runs", status_code=201, response_model=RunOut)
@@ -46,7 +47,7 @@ def list_runs(
     limit: Limit = 50,
     offset: Offset = 0,
     dataset_id: Annotated[int | None, Query(ge=1, le=MAX_ID)] = None,
-    status: Status | None = None,
+    status: RunStatus | None = None,
 ) -> PageOut:
     page = services.runs.list(limit=limit, offset=offset, dataset_id=dataset_id, status=status)
     return PageOut[RunOut](
@@ -114,7 +115,10 @@ def get_series(
     time, lines = services.runs.series(run_id, points=points)
     return SeriesOut(
         time=finite_or_none(time),
-        series={x.name: SeriesLine(unit=x.unit, values=finite_or_none(x.values)) for x in lines},
+        series={
+            x.name: SeriesLine(unit=x.unit, role=x.role, values=finite_or_none(x.values))
+            for x in lines
+        },
     )
 
 

@@ -18,8 +18,9 @@ from app.api.schemas import RunOut
 from app.config import Settings
 from app.domain import FINISHED, MapVersion, Run, Series
 from app.errors import AppError
+from app.io.decimate import nested_or_none
+from app.runs.frames import ErrorFrame, FullFrame, series_line
 from app.runs.hub import LiveState
-from app.services.decimate import finite_or_none, nested_or_none
 
 router = APIRouter(tags=["live"])
 
@@ -34,11 +35,8 @@ def _db_parts(services: Services, run_id: int) -> tuple[Run, MapVersion | None, 
     return run, version, lines
 
 
-def _full_from_db(run: Run, version: MapVersion | None, lines: list[Series]) -> dict[str, Any]:
-    series = {
-        x.name: {"unit": x.unit, "time": finite_or_none(x.time), "values": finite_or_none(x.values)}
-        for x in lines
-    }
+def _full_from_db(run: Run, version: MapVersion | None, lines: list[Series]) -> FullFrame:
+    series = {x.name: series_line(x) for x in lines}
     axes = None if version is None else version.axes
     trajectory: dict[str, Any] = {"time": [], "points": []}
     if axes and all(a["name"] in series for a in axes):
@@ -47,51 +45,50 @@ def _full_from_db(run: Run, version: MapVersion | None, lines: list[Series]) -> 
             "time": series[axes[0]["name"]]["time"],
             "points": [list(p) for p in zip(*cols, strict=True)],
         }
-    return {
-        "type": "full",
-        "run": RunOut.of(run).model_dump(mode="json"),
-        "axes": axes,
-        "values": None if version is None else nested_or_none(version.values),
-        "variances": None if version is None else nested_or_none(version.variances),
-        "visits": None if version is None else nested_or_none(version.visits),
-        "active_cell": None,
-        "trajectory": trajectory,
-        "series": series,
-        "metrics": dict(run.metrics),
-        "rejected": dict(run.rejected),
-        "sample": run.sample,
-        "n_samples": run.n_samples,
-    }
+    return FullFrame(
+        run=RunOut.of(run).model_dump(mode="json"),
+        axes=axes,
+        values=None if version is None else nested_or_none(version.values),
+        variances=None if version is None else nested_or_none(version.variances),
+        visits=None if version is None else nested_or_none(version.visits),
+        active_cell=None,
+        trajectory=trajectory,
+        series=series,
+        metrics=dict(run.metrics),
+        rejected=dict(run.rejected),
+        sample=run.sample,
+        n_samples=run.n_samples,
+    )
 
 
-def _full_from_live(run: Run, live: LiveState) -> dict[str, Any]:
+def _full_from_live(run: Run, live: LiveState) -> FullFrame:
     doc = RunOut.of(run).model_dump(mode="json")
     doc |= {"status": live.status, "progress": live.progress, "sample": live.sample}
-    return {
-        "type": "full",
-        "run": doc,
-        "axes": live.axes,
-        "values": live.values,
-        "variances": live.variances,
-        "visits": live.visits,
-        "active_cell": live.active_cell,
-        "trajectory": {"time": list(live.trajectory_time), "points": list(live.trajectory_points)},
-        "series": {
+    return FullFrame(
+        run=doc,
+        axes=live.axes,
+        values=live.values,
+        variances=live.variances,
+        visits=live.visits,
+        active_cell=live.active_cell,
+        trajectory={"time": list(live.trajectory_time), "points": list(live.trajectory_points)},
+        series={
             name: {
                 "unit": live.units.get(name, ""),
+                "role": live.roles.get(name),
                 "time": list(s["time"]),
                 "values": list(s["values"]),
             }
             for name, s in live.series.items()
         },
-        "metrics": dict(live.metrics or {}),
-        "rejected": dict(live.rejected or {}),
-        "sample": live.sample,
-        "n_samples": live.n_samples,
-    }
+        metrics=dict(live.metrics or {}),
+        rejected=dict(live.rejected or {}),
+        sample=live.sample,
+        n_samples=live.n_samples,
+    )
 
 
-async def _full(services: Services, run_id: int) -> tuple[dict[str, Any], str]:
+async def _full(services: Services, run_id: int) -> tuple[FullFrame, str]:
     """A full frame and the run's status: from the hub's live state while the run executes
     (one small query for the run document), else from the stored version and series."""
     if services.hub.state(run_id) is not None:
@@ -101,16 +98,6 @@ async def _full(services: Services, run_id: int) -> tuple[dict[str, Any], str]:
             return _full_from_live(run, live), live.status
     run, version, lines = await run_in_threadpool(_db_parts, services, run_id)
     return _full_from_db(run, version, lines), run.status
-
-
-def _status_message(frame: dict[str, Any]) -> dict[str, Any]:
-    run = frame["run"]
-    return {
-        "type": "status",
-        "status": run["status"],
-        "error": run["error"],
-        "progress": run["progress"],
-    }
 
 
 @router.websocket("/runs/{run_id}/stream")
@@ -133,13 +120,13 @@ async def stream_run(websocket: WebSocket, run_id: int) -> None:
         try:
             frame, status = await _full(services, run_id)
         except AppError as exc:
-            await websocket.send_json({"type": "error", "error": exc.body()["error"]})
+            await websocket.send_json(ErrorFrame(exc.body()["error"]).to_json())
             await websocket.close(code=CLOSE_NOT_FOUND)
             return
         viewer.reset()
-        await websocket.send_json(frame)
+        await websocket.send_json(frame.to_json())
         if status in FINISHED:
-            await websocket.send_json(_status_message(frame))
+            await websocket.send_json(frame.status().to_json())
         receiver = asyncio.create_task(_drain_client(websocket))
         sender = asyncio.create_task(_send_loop(websocket, services, viewer, run_id))
         _done, pending = await asyncio.wait({receiver, sender}, return_when=asyncio.FIRST_COMPLETED)
@@ -178,8 +165,8 @@ async def _send_loop(websocket: WebSocket, services: Services, viewer: Any, run_
             if message is None:
                 frame, status = await _full(services, run_id)
                 viewer.reset()  # deltas queued meanwhile are already in the frame
-                await websocket.send_json(frame)
+                await websocket.send_json(frame.to_json())
                 if status in FINISHED:
-                    await websocket.send_json(_status_message(frame))
+                    await websocket.send_json(frame.status().to_json())
                 continue
             await websocket.send_text(message)

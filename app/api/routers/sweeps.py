@@ -10,7 +10,7 @@ from fastapi import APIRouter, Query
 
 from app.api.deps import MAX_ID, Id, ServicesDep
 from app.api.schemas import ERRORS, AggregateOut, AxisOut, BatchOut, GroupOut, GroupRunOut, PageOut
-from app.services.decimate import nested_or_none
+from app.io.decimate import nested_or_none
 from app.services.sweeps import BatchRequest, GroupView, SweepRequest, rank
 
 router = APIRouter(tags=["sweeps and batches"], responses=ERRORS)

@@ -1,5 +1,7 @@
 """Sample gates: which log samples a run may learn from, and why the others were rejected.
 
+Used when a run is planned (validation) and by its worker (the accept mask, per-cell counts).
+
 A run's config holds a list of gates over the dataset's channels (the answer to "why did
 my map not learn here?"):
 
@@ -183,6 +185,25 @@ def nearest_cell(idx: np.ndarray, w: np.ndarray) -> np.ndarray:
     return np.take_along_axis(idx, np.argmax(w, axis=1)[:, None], axis=1)[:, 0]
 
 
+def cell_counts(
+    idx: np.ndarray, w: np.ndarray | None, mask: np.ndarray, n_cells: int
+) -> np.ndarray:
+    """``(n_cells,)`` count of the samples in ``mask`` per cell.
+
+    ``idx``: ``(n,)`` flat cell of each sample (counts are integers), or the regressor's
+    ``(n, 2^d)`` indices with weights ``w`` (counts are interpolation-weighted, so a sample
+    counts once in total, split over its corners).
+    """
+    idx = np.asarray(idx)
+    if idx.ndim == 1:
+        return np.bincount(idx[mask], minlength=n_cells)[:n_cells]
+    if w is None:
+        raise ValueError("regressor indices (n, 2^d) need their weights w")
+    return np.bincount(idx[mask].ravel(), weights=np.asarray(w)[mask].ravel(), minlength=n_cells)[
+        :n_cells
+    ]
+
+
 def rejected_per_cell(
     result: GateResult,
     idx: np.ndarray,
@@ -191,23 +212,9 @@ def rejected_per_cell(
     *,
     attributed: bool = True,
 ) -> dict[str, np.ndarray]:
-    """Rejected samples per cell and gate.
+    """Rejected samples per cell and gate (:func:`cell_counts` of each gate's mask).
 
-    ``idx``: ``(n,)`` flat cell of each sample (counts are integers), or the regressor's
-    ``(n, 2^d)`` indices with weights ``w`` (counts are interpolation-weighted, so a sample
-    counts once in total, split over its corners). ``attributed``: use the disjoint
-    first-gate attribution (else each gate's own mask).
+    ``attributed``: use the disjoint first-gate attribution (else each gate's own mask).
     """
     masks = result.first_gate() if attributed else result.masks
-    idx = np.asarray(idx)
-    out: dict[str, np.ndarray] = {}
-    for label, mask in masks.items():
-        if idx.ndim == 1:
-            out[label] = np.bincount(idx[mask], minlength=n_cells)[:n_cells]
-        else:
-            if w is None:
-                raise ValueError("regressor indices (n, 2^d) need their weights w")
-            out[label] = np.bincount(
-                idx[mask].ravel(), weights=np.asarray(w)[mask].ravel(), minlength=n_cells
-            )[:n_cells]
-    return out
+    return {label: cell_counts(idx, w, mask, n_cells) for label, mask in masks.items()}

@@ -1,0 +1,88 @@
+"""A dataset's stored payload: its samples and, for a simulated one, its truth.
+
+The samples are one npz (time + channels, float64) so any worker process or machine sharing
+the database can run on them; the truth (true map, scoring points, true series) feeds the
+run metrics. Written by the dataset service, read by the run workers and the exports.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from app.db import blobs
+from app.domain import Channel
+from estimation.scenarios import ScenarioData
+from estimation.signals import Signals
+from estimation.table import Table
+
+
+def pack_signals(signals: Signals) -> bytes:
+    arrays = {"time": signals.time}
+    arrays |= {f"c{i}": signals[name] for i, name in enumerate(signals.names)}
+    return blobs.pack(arrays)
+
+
+def unpack_signals(blob: bytes, channels: list[Channel]) -> Signals:
+    arrays = blobs.unpack(blob)
+    return Signals(
+        arrays["time"],
+        {c.name: arrays[f"c{i}"] for i, c in enumerate(channels)},
+        {c.name: c.unit for c in channels},
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class Truth:
+    """What a simulated dataset knows that a log does not (see :class:`ScenarioData`)."""
+
+    true_map: Table | None
+    map_inputs: tuple[str, ...]
+    map_output: str | None
+    map_points: np.ndarray | None
+    scored_series: dict[str, np.ndarray]
+
+    def scenario_data(self, scenario: str, seed: int, signals: Signals) -> ScenarioData:
+        return ScenarioData(
+            scenario=scenario,
+            seed=seed,
+            signals=signals,
+            truth={},
+            true_map=self.true_map,
+            map_inputs=self.map_inputs,
+            map_output=self.map_output,
+            map_points=self.map_points,
+            scored_series=self.scored_series,
+        )
+
+
+def pack_truth(data: ScenarioData) -> bytes:
+    names = list(data.scored_series)
+    true_map = data.true_map
+    meta: dict[str, Any] = {
+        "true_map_axes": None if true_map is None else [a.to_dict() for a in true_map.axes],
+        "map_inputs": list(data.map_inputs),
+        "map_output": data.map_output,
+        "scored": names,
+    }
+    arrays: dict[str, np.ndarray] = {f"s{i}": data.scored_series[n] for i, n in enumerate(names)}
+    if data.true_map is not None:
+        arrays["true_map"] = data.true_map.values
+        arrays["map_points"] = data.scoring_points()
+    return blobs.pack_meta(arrays, meta)
+
+
+def unpack_truth(blob: bytes) -> Truth:
+    arrays, meta = blobs.unpack_meta(blob)
+    true_map = None
+    if meta["true_map_axes"] is not None:
+        true_map = Table.from_dict({"axes": meta["true_map_axes"], "values": arrays["true_map"]})
+    return Truth(
+        true_map=true_map,
+        map_inputs=tuple(meta["map_inputs"]),
+        map_output=meta["map_output"],
+        map_points=arrays.get("map_points"),
+        scored_series={n: arrays[f"s{i}"] for i, n in enumerate(meta["scored"])},
+    )

@@ -1,0 +1,106 @@
+"""A run's live messages: its start, at most ``live_fps`` ticks a second, its status.
+
+Publishing never waits: a tick that is not due yet is skipped (its samples go into the next
+one), and ``publish`` itself drops a message rather than block (a full queue).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from app.io.decimate import finite_or_none, nested_or_none, stride_decimate
+from app.runs.frames import StartMessage, StatusFrame, TickMessage
+from app.runs.results import RunResults
+from app.runs.results import finite_or_none as finite_scalar
+from estimation.estimator import Snapshot
+
+Publish = Callable[[dict[str, Any]], None]
+LIVE_POINTS_PER_TICK = 100
+
+
+class LiveTicks:
+    """The live side of one run: what was shown (``sample``) and when the next tick is due."""
+
+    def __init__(self, run_id: int, live_fps: float, publish: Publish) -> None:
+        self.run_id, self.live_fps, self.publish = run_id, live_fps, publish
+        self.next_tick = 0.0  # monotonic time the next tick is allowed at
+        self.sample = 0  # first sample not yet shown
+        self.seq = 0
+
+    def start(self, snap: Snapshot, results: RunResults) -> None:
+        table = snap.table
+        lines = results.lines()
+        self.publish(
+            StartMessage(
+                run_id=self.run_id,
+                axes=None if table is None else [a.to_dict() for a in table.axes],
+                n_samples=results.n,
+                trajectory_channels=[] if table is None else [a.name for a in table.axes],
+                units={x.name: x.unit for x in lines},
+                roles={x.name: str(x.role) for x in lines},
+            ).to_json()
+        )
+
+    def status(self, status: str, error: str | None, progress: float) -> None:
+        frame = StatusFrame(run_id=self.run_id, status=status, error=error, progress=progress)
+        self.publish(frame.to_message())
+
+    def tick(
+        self,
+        snap: Snapshot,
+        results: RunResults,
+        *,
+        force: bool = False,
+        metrics: dict[str, Any] | None = None,
+    ) -> None:
+        """The samples since the last tick, the map, the metrics: if due (or ``force``)."""
+        now = time.monotonic()
+        if not force and (now < self.next_tick or snap.sample <= self.sample):
+            return
+        self.next_tick = now + 1.0 / self.live_fps  # never more than live_fps a second
+        a, z = self.sample, snap.sample
+        self.sample = z
+        self.seq += 1
+        index = a + stride_decimate(max(z - a, 0), LIVE_POINTS_PER_TICK)
+        signals = results.signals
+        time_s = signals.time[index]
+        table = snap.table
+        trajectory: dict[str, Any] = {"time": [], "points": []}
+        active = None
+        if table is not None and all(ax.name in signals for ax in table.axes):
+            points = signals.stack([ax.name for ax in table.axes])[index]
+            trajectory = {"time": finite_or_none(time_s), "points": points.tolist()}
+            active = results.active_cell(z)
+        series = {
+            x.name: {"time": finite_or_none(time_s), "values": finite_or_none(x.values[index])}
+            for x in results.lines()
+        }
+        live_metrics = dict(metrics or {})
+        rmse = results.live_rmse()
+        if rmse is not None:
+            live_metrics.setdefault("output_rmse", rmse)
+        variances = None
+        if table is not None and snap.variance is not None:
+            variances = np.asarray(snap.variance).reshape(table.shape)
+        message = TickMessage(
+            run_id=self.run_id,
+            seq=self.seq,
+            sample=z,
+            n_samples=results.n,
+            progress=z / results.n,
+            time_s=snap.time_s,
+            emitted_at=time.time(),  # wall clock (s since epoch), for frame-delay figures
+            values=None if table is None else nested_or_none(table.values),
+            variances=nested_or_none(variances),
+            visits=nested_or_none(results.visits),
+            active_cell=active,
+            trajectory=trajectory,
+            series=series,
+            metrics={k: finite_scalar(v) for k, v in live_metrics.items()},
+            rejected=results.run_rejected(),
+        )
+        self.publish(message.to_json())

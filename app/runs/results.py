@@ -1,0 +1,250 @@
+"""What a run accumulates as its chunks come in, and the series and metrics it stores.
+
+Per chunk (:meth:`RunResults.absorb`) the estimator's snapshot is folded into per-sample
+output arrays and status codes, the running Σ residual² of accepted samples (the live
+``output_rmse``), and, for a map, per-cell visits and rejections:
+
+    visits[c]      = Σ_{k accepted} w_k,c
+    rejected_r[c]  = Σ_{k rejected for reason r} w_k,c
+
+with ``w_k,c`` the interpolation weight of sample k on cell c (the table's regressor,
+computed once for the whole log). A rejection is the estimator's (innovation gate, sensor
+delay: the snapshot's status code) or a sample gate's, attributed to the first gate
+rejecting it (:meth:`GateResult.first_gate`).
+
+The result series are namespaced by role (:class:`SeriesRole`): the operating-point
+input channels, the measured output, the estimator's outputs (estimates), the simulated
+truths and the errors truth − estimate. Each has a key unique within the run: its name,
+or ``role:name`` where an earlier role already has that name (an EKF estimates
+``p_im_pa``, which is also one of its input channels).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from app.domain import Dataset, ResumePoint, Run, Series, SeriesRole
+from app.io.decimate import stride_decimate
+from app.io.payload import Truth
+from app.runs.gates import GateResult, cell_counts, nearest_cell
+from estimation.estimator import Snapshot
+from estimation.metrics import score_run
+from estimation.registry import EstimatorSpec
+from estimation.signals import Signals
+from estimation.table import Table
+
+STATUS_ACCEPTED = 0
+# Snapshot status codes that count against a cell, by name (see estimation.estimator.Snapshot;
+# code 1, the accept mask, is counted by the gate that set it).
+CELL_STATUS = {"innovation": 2, "delay": 3}
+STATUS_KEY = "__status__"  # the status codes' name in a persisted segment
+
+
+class RunResults:
+    """The per-sample outputs, status codes and cell counts of one run, so far."""
+
+    def __init__(
+        self,
+        run: Run,
+        spec: EstimatorSpec,
+        dataset: Dataset,
+        signals: Signals,
+        truth: Truth | None,
+        gates: GateResult | None,
+    ) -> None:
+        self.run, self.spec, self.dataset, self.signals = run, spec, dataset, signals
+        self.truth, self.gates = truth, gates
+        self.n = len(signals)
+        self.outputs: dict[str, np.ndarray] = {}
+        self.status = np.full(self.n, -1, dtype=np.int8)
+        self.grid: Table | None = None
+        self.idx: np.ndarray | None = None  # the grid's regressor over the whole log
+        self.w: np.ndarray | None = None
+        self.visits: np.ndarray | None = None
+        self.cell_rejections: dict[str, np.ndarray] = {}
+        self.rejected: dict[str, int] = {}
+        self.sq_sum = 0.0  # running Σ residual² over accepted samples
+        self.sq_n = 0
+        self._gate_masks = None if gates is None else gates.first_gate()
+
+    # -- accumulation -------------------------------------------------------------------------
+
+    def absorb(self, snap: Snapshot) -> None:
+        """Fold the chunk ``[snap.chunk_start, snap.sample)`` in."""
+        a, z = snap.chunk_start, snap.sample
+        if snap.status is not None and snap.status.size == z - a:
+            self.status[a:z] = snap.status
+        else:
+            self.status[a:z] = STATUS_ACCEPTED
+        for name, values in snap.outputs.items():
+            values = np.asarray(values, dtype=np.float64)
+            if values.ndim == 1 and values.size == z - a:
+                self._output(name)[a:z] = values
+        self.rejected = {k: int(v) for k, v in snap.rejected.items()}
+        if snap.table is not None:
+            self._count_cells(snap.table, a, z)
+        residual = snap.outputs.get("residual")
+        if residual is not None and residual.size == z - a:
+            self._add_squares(np.asarray(residual), self.status[a:z])
+
+    def restore(self, point: ResumePoint) -> None:
+        """Continue from a persisted version: its segments, visits and rejections."""
+        start = 0
+        for segment in point.segments:
+            status = segment[STATUS_KEY]
+            stop = start + status.size
+            self.status[start:stop] = status
+            for name, values in segment.items():
+                if name != STATUS_KEY:
+                    self._output(name)[start:stop] = values
+            start = stop
+        if start != point.step:
+            raise RuntimeError(f"persisted segments cover {start} samples, version {point.step}")
+        self.visits = point.visits
+        self.cell_rejections = dict(point.cell_rejections)
+        residual = self.outputs.get("residual")
+        if residual is not None:
+            self._add_squares(residual[:start], self.status[:start])
+
+    def segment(self, a: int, z: int) -> dict[str, np.ndarray]:
+        """Samples ``[a, z)`` of every output and the status codes, as a version stores them."""
+        segment = {name: values[a:z] for name, values in self.outputs.items()}
+        segment[STATUS_KEY] = self.status[a:z]
+        return segment
+
+    def run_rejected(self) -> dict[str, int]:
+        """Rejected samples by reason: the estimator's, then ``gate:<label>``."""
+        out = dict(self.rejected)
+        if self.gates is not None:
+            out |= {f"gate:{k}": int(v) for k, v in self.gates.rejected.items()}
+        return out
+
+    def live_rmse(self) -> float | None:
+        """RMS residual of the accepted samples so far."""
+        return math.sqrt(self.sq_sum / self.sq_n) if self.sq_n else None
+
+    def active_cell(self, z: int) -> list[int] | None:
+        """The grid node nearest the operating point of sample ``z − 1``."""
+        if self.grid is None or self.idx is None or self.w is None or z <= 0:
+            return None
+        flat = int(nearest_cell(self.idx[z - 1 : z], self.w[z - 1 : z])[0])
+        return [int(i) for i in np.unravel_index(flat, self.grid.shape)]
+
+    def _output(self, name: str) -> np.ndarray:
+        if name not in self.outputs:
+            self.outputs[name] = np.full(self.n, np.nan)
+        return self.outputs[name]
+
+    def _add_squares(self, residual: np.ndarray, status: np.ndarray) -> None:
+        ok = (status == STATUS_ACCEPTED) & np.isfinite(residual)
+        self.sq_sum += float(np.sum(residual[ok] ** 2))
+        self.sq_n += int(ok.sum())
+
+    def _count_cells(self, table: Table, a: int, z: int) -> None:
+        """Visits (interpolation weight of accepted samples) and rejections per cell."""
+        if self.grid is None:
+            names = [ax.name for ax in table.axes]
+            if not all(name in self.signals for name in names):
+                return
+            self.grid = table
+            self.idx, self.w = table.regressor(self.signals.stack(names))
+            if self.visits is None:
+                self.visits = np.zeros(table.shape)
+        assert self.visits is not None
+        assert self.idx is not None
+        assert self.w is not None
+        idx, w, status = self.idx[a:z], self.w[a:z], self.status[a:z]
+        size, shape = self.grid.size, table.shape
+        self.visits += cell_counts(idx, w, status == STATUS_ACCEPTED, size).reshape(shape)
+        for label, mask in self._rejection_masks(a, z, status).items():
+            if not mask.any():
+                self.cell_rejections.setdefault(label, np.zeros(shape))
+                continue
+            counts = cell_counts(idx, w, mask, size).reshape(shape)
+            self.cell_rejections[label] = self.cell_rejections.get(label, 0) + counts
+
+    def _rejection_masks(self, a: int, z: int, status: np.ndarray) -> dict[str, np.ndarray]:
+        masks = {name: status == code for name, code in CELL_STATUS.items()}
+        if self._gate_masks is not None:
+            masks |= {label: mask[a:z] for label, mask in self._gate_masks.items()}
+        return masks
+
+    # -- series -------------------------------------------------------------------------------
+
+    def lines(self) -> list[Series]:
+        """Every result line at full rate, keyed uniquely (see the module docstring)."""
+        raw: list[tuple[str, SeriesRole, str, np.ndarray]] = []
+        units = self.signals.units
+        for channel in self._operating_channels():
+            raw.append((channel, SeriesRole.INPUT, units.get(channel, ""), self.signals[channel]))
+        config = self.run.estimator_config
+        output, out_unit = config.get("output"), config.get("output_unit", "")
+        if isinstance(output, str) and output in self.signals:
+            unit = units.get(output, "")
+            raw.append(("measured", SeriesRole.MEASURED, unit, self.signals[output]))
+        for name, values in self.outputs.items():
+            raw.append((name, SeriesRole.OUTPUT, self._unit(name, out_unit), values))
+        if self.truth is not None:
+            for name, truth in self.truth.scored_series.items():
+                if name in self.outputs:
+                    unit = self._unit(name, out_unit)
+                    raw.append((f"{name}_true", SeriesRole.TRUTH, unit, truth))
+                    error = truth - self.outputs[name]
+                    raw.append((f"{name}_error", SeriesRole.ERROR, unit, error))
+        out: list[Series] = []
+        taken: set[str] = set()
+        for name, role, unit, values in raw:
+            key = name if name not in taken else f"{role}:{name}"
+            taken.add(key)
+            out.append(Series(key, unit, self.signals.time, values, role))
+        return out
+
+    def series(self, points: int) -> list[Series]:
+        """:meth:`lines` at most ``points`` samples long (stride-decimated), for storage."""
+        index = stride_decimate(self.n, points)
+        time_s = self.signals.time[index]
+        return [Series(x.name, x.unit, time_s, x.values[index], x.role) for x in self.lines()]
+
+    def _unit(self, name: str, out_unit: str) -> str:
+        """The spec's unit of an output; ``""`` there means the output channel's unit."""
+        return self.spec.output_units.get(name, "") or out_unit
+
+    def _operating_channels(self) -> list[str]:
+        table = self.run.table
+        names = [a["name"] for a in table["axes"]] if table else list(self.run.signals.values())
+        if not names and self.grid is not None:
+            names = [a.name for a in self.grid.axes]
+        return [name for name in dict.fromkeys(names) if name in self.signals]
+
+    # -- metrics ------------------------------------------------------------------------------
+
+    def metrics(self, snap: Snapshot, run_s: float) -> dict[str, float | None]:
+        """The run's final metrics: timing, counts, ``output_rmse``, coverage and, on a
+        simulated dataset, the scores against its truth (:func:`score_run`)."""
+        truth = None
+        if self.truth is not None:
+            truth = self.truth.scenario_data(
+                self.dataset.scenario or "", self.dataset.seed or 0, self.signals
+            )
+        scored = score_run(self.outputs, self.status, table=snap.table, truth=truth)
+        metrics: dict[str, float] = {
+            "run_s": run_s,
+            "samples": float(self.n),
+            "accepted": float(np.count_nonzero(self.status == STATUS_ACCEPTED)),
+        }
+        if "output_rmse" in scored:
+            metrics["output_rmse"] = scored.pop("output_rmse")
+        if snap.table is not None and self.visits is not None:
+            metrics["coverage"] = float(np.mean(self.visits >= 1.0))
+        metrics |= scored
+        return {k: finite_or_none(v) for k, v in metrics.items()}
+
+
+def finite_or_none(value: Any) -> float | None:
+    if value is None:
+        return None
+    value = float(value)
+    return value if math.isfinite(value) else None
