@@ -26,17 +26,17 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from scripts.bench_service import make_log, run_body  # noqa: E402
-from tests.app.service.cluster import DaskCluster  # noqa: E402
-from tests.app.service.conftest import PgDatabases  # noqa: E402
-from tests.app.service.server import Server  # noqa: E402
+from scripts.bench_service import drive_run_body, make_log  # noqa: E402
+from tests.support.cluster import DaskCluster  # noqa: E402
+from tests.support.databases import PgDatabases  # noqa: E402
+from tests.support.server import Server  # noqa: E402
 
 SIGMA_W = [float(x) for x in np.geomspace(1, 50, 20)]
 SIGMA_V = [float(x) for x in np.geomspace(5, 100, 10)]
 
 
 def sweep(server: Server, dataset_id: int, timeout: float = 1800.0) -> dict[str, Any]:
-    body = run_body(dataset_id, p0=1e4) | {
+    body = drive_run_body(dataset_id, p0=1e4) | {
         "parameters": {"sigma_w": SIGMA_W, "sigma_v": SIGMA_V},
         "metric": "output_rmse",
     }

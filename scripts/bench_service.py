@@ -21,10 +21,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import signal
-import socket
 import statistics
-import subprocess
 import sys
 import tempfile
 import threading
@@ -36,6 +33,10 @@ import httpx
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # the shared server helper, when run as scripts/bench_service.py
+
+from tests.support.server import Server, run_body  # noqa: E402
+
 SPEED = [750, 780, 1000, 1250, 1500, 1750, 2000, 2500, 3000, 3500, 4000, 4500]
 FUEL = [0, 5, 10, 15, 20, 25, 30, 34, 38, 42, 46, 50, 55, 60, 65, 70, 75, 80]
 
@@ -54,43 +55,6 @@ def make_log(path: Path, rows: int, rate_hz: float = 100.0) -> None:
     with path.open("w") as f:
         f.write(",".join(header) + "\n")
         np.savetxt(f, data, delimiter=",", fmt="%.6f")
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def start_server(url: str, port: int, log: Path) -> subprocess.Popen[bytes]:
-    args = [
-        sys.executable, "-m", "app.cli", "serve", "--port", str(port), "--database-url", url,
-        "--no-demo", "--log-level", "warning",
-    ]  # fmt: skip
-    proc = subprocess.Popen(
-        args, cwd=ROOT, stdout=log.open("w"), stderr=subprocess.STDOUT, start_new_session=True
-    )
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline:
-        try:
-            if httpx.get(f"http://127.0.0.1:{port}/api/health").status_code == 200:
-                return proc
-        except httpx.TransportError:
-            time.sleep(0.2)
-    raise RuntimeError(f"server did not start: {log.read_text()[-2000:]}")
-
-
-def wait(
-    client: httpx.Client, run_id: int, until: tuple[str, ...], timeout: float = 600.0
-) -> dict[str, Any]:
-    deadline = time.monotonic() + timeout
-    while True:
-        run = client.get(f"/api/runs/{run_id}").json()
-        if run["status"] in until:
-            return run
-        if time.monotonic() > deadline:
-            raise TimeoutError(f"run {run_id} still {run['status']} after {timeout:.0f} s")
-        time.sleep(0.05)
 
 
 class Worker(threading.Thread):
@@ -114,19 +78,16 @@ class Worker(threading.Thread):
             raise RuntimeError(f"benchmark thread failed: {self.error!r}") from self.error
 
 
-def run_body(dataset_id: int, **config: Any) -> dict[str, Any]:
-    return {
-        "dataset_id": dataset_id,
-        "estimator": "skf",
-        "signals": {"y": "nox_ppm"},
-        "table": {
-            "axes": [
-                {"name": "speed_rpm", "breakpoints": SPEED},
-                {"name": "fuel_mg_per_stroke", "breakpoints": FUEL},
-            ]
-        },
-        "config": {"sigma_w": 15, "sigma_v": 25, "p0": 1e4, **config},
+def drive_run_body(dataset_id: int, **config: Any) -> dict[str, Any]:
+    """The SKF on NOx over the 12×18 speed × fuel grid of :func:`make_log`'s log."""
+    table = {
+        "axes": [
+            {"name": "speed_rpm", "breakpoints": SPEED},
+            {"name": "fuel_mg_per_stroke", "breakpoints": FUEL},
+        ]
     }
+    noise = {"sigma_w": 15, "sigma_v": 25, "p0": 1e4}
+    return run_body(dataset_id, signals={"y": "nox_ppm"}, table=table, **(noise | config))
 
 
 def viewer(url: str, seconds: float, counts: list[int], index: int) -> None:
@@ -186,9 +147,8 @@ def main() -> None:
     url = args.database_url or f"sqlite:///{work / 'bench.db'}"
     log_path = work / "log.csv"
     make_log(log_path, args.rows)
-    port = free_port()
-    proc = start_server(url, port, work / "server.log")
-    base = f"http://127.0.0.1:{port}"
+    server = Server(url, workers=None)
+    base = server.base
     result: dict[str, Any] = {
         "rows": args.rows,
         "channels": 12,
@@ -204,8 +164,8 @@ def main() -> None:
             )
             tiny = client.post("/api/datasets", files={"file": ("w.csv", small.encode())}).json()
             for _ in range(2):
-                warm = client.post("/api/runs", json=run_body(tiny["id"])).json()
-                wait(client, warm["id"], ("succeeded", "failed"), args.timeout)
+                warm = client.post("/api/runs", json=drive_run_body(tiny["id"])).json()
+                server.wait_run(warm["id"], ("succeeded", "failed"), args.timeout)
             bulk_latencies: list[float] = []
             stop = threading.Event()
             paths = ["/api/runs?limit=5", "/api/datasets"]
@@ -218,8 +178,8 @@ def main() -> None:
             response.raise_for_status()
             dataset = response.json()
             t1 = time.perf_counter()
-            run = client.post("/api/runs", json=run_body(dataset["id"])).json()
-            done = wait(client, run["id"], ("succeeded", "failed"), args.timeout)
+            run = client.post("/api/runs", json=drive_run_body(dataset["id"])).json()
+            done = server.wait_run(run["id"], ("succeeded", "failed"), args.timeout)
             t2 = time.perf_counter()
             stop.set()
             for th in pollers:
@@ -233,16 +193,16 @@ def main() -> None:
                 "total_s": round(t2 - t0, 2),
                 "rows_per_s": round(args.rows / (t2 - t0)),
                 "versions": done["n_versions"],
-                "server_peak_rss_mb": peak_rss_mb(proc.pid),
+                "server_peak_rss_mb": peak_rss_mb(server.process.pid),
                 **latency_figures("bulk", bulk_latencies),
             }
 
             duration_s = args.rows / 100.0
             pace = duration_s / (args.live_seconds * 1.5)
-            live = client.post("/api/runs", json=run_body(dataset["id"], pace=pace)).json()
-            wait(client, live["id"], ("running",), args.timeout)
+            live = client.post("/api/runs", json=drive_run_body(dataset["id"], pace=pace)).json()
+            server.wait_run(live["id"], ("running",), args.timeout)
             counts = [0] * args.viewers
-            ws_url = f"ws://127.0.0.1:{port}/api/runs/{live['id']}/stream"
+            ws_url = f"{server.ws_base}/api/runs/{live['id']}/stream"
             threads = [
                 Worker(viewer, ws_url, args.live_seconds, counts, i) for i in range(args.viewers)
             ]
@@ -267,8 +227,7 @@ def main() -> None:
                 **latency_figures("live", latencies),
             }
     finally:
-        proc.send_signal(signal.SIGTERM)
-        proc.wait(timeout=60)
+        server.stop()
     if args.json:
         print(json.dumps(result))
     else:

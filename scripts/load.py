@@ -42,11 +42,13 @@ import numpy as np
 import websockets
 
 ROOT = Path(__file__).resolve().parents[1]
-U1 = [500.0, 1500.0, 2500.0, 3500.0]
-U2 = [0.0, 20.0, 40.0, 60.0]
+sys.path.insert(0, str(ROOT))  # the shared server helper, when run as scripts/load.py
+
+from tests.support.server import FINISHED as TERMINAL  # noqa: E402
+from tests.support.server import Server, run_body  # noqa: E402
+
 USER_WATCH_S = 60.0  # a user watches its run to the end, or this long
 THINK_S = (0.5, 2.0)  # a user's pause between one run and the next
-TERMINAL = ("succeeded", "failed", "cancelled", "interrupted")
 
 
 def small_log(seed: int, rows: int = 1000, rate_hz: float = 100.0) -> bytes:
@@ -57,16 +59,6 @@ def small_log(seed: int, rows: int = 1000, rate_hz: float = 100.0) -> bytes:
     lines = ["time [s],u1 [rpm],u2 [mg/stroke],y [ppm]"]
     lines += [f"{a:.4f},{b:.3f},{c:.3f},{d:.5f}" for a, b, c, d in zip(t, u1, u2, y, strict=True)]
     return ("\n".join(lines) + "\n").encode()
-
-
-def run_body(dataset_id: int, pace: float) -> dict[str, Any]:
-    return {
-        "dataset_id": dataset_id,
-        "estimator": "skf",
-        "signals": {"y": "y"},
-        "table": {"axes": [{"name": "u1", "breakpoints": U1}, {"name": "u2", "breakpoints": U2}]},
-        "config": {"sigma_w": 0.01, "sigma_v": 0.05, "p0": 10.0, "pace": pace},
-    }
 
 
 @dataclass
@@ -132,9 +124,8 @@ async def user(base: str, index: int, until: float, tally: Tally, token: str | N
             dataset = await tally.call(client, "POST", "/api/datasets", files=files)
             if dataset is None:
                 continue
-            run = await tally.call(
-                client, "POST", "/api/runs", json=run_body(dataset["id"], rng.choice([5, 10, 20]))
-            )
+            body = run_body(dataset["id"], pace=rng.choice([5, 10, 20]))
+            run = await tally.call(client, "POST", "/api/runs", json=body)
             if run is None:
                 continue
             tally.runs.append(int(run["id"]))
@@ -157,7 +148,8 @@ async def streamer(base: str, index: int, until: float, tally: Tally, token: str
         if dataset is None:
             return
         while (left := until - time.monotonic()) > 1.0:
-            run = await tally.call(client, "POST", "/api/runs", json=run_body(dataset["id"], 1))
+            body = run_body(dataset["id"], pace=1)
+            run = await tally.call(client, "POST", "/api/runs", json=body)
             if run is None:
                 return
             tally.runs.append(int(run["id"]))
@@ -296,9 +288,6 @@ def main() -> None:
     args = parser.parse_args()
     server = None
     if args.url is None:
-        sys.path.insert(0, str(ROOT))
-        from tests.app.service.server import Server
-
         work = Path(tempfile.mkdtemp(prefix="mapwise-load-"))
         server = Server(
             args.database_url or f"sqlite:///{work / 'load.db'}",

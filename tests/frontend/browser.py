@@ -1,18 +1,16 @@
 """What the browser tests and ``scripts/screenshot.py`` share: Debian's Chromium with the
-flags it needs in a container, and a real ``mapwise serve`` on a temporary SQLite database."""
+flags it needs in a container, and a real ``mapwise serve`` (:class:`tests.support.server.Server`)
+on a temporary SQLite database."""
 
 from __future__ import annotations
 
-import os
-import socket
-import subprocess
-import sys
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import httpx
+
+from tests.support.server import Server
 
 if TYPE_CHECKING:
     from playwright.sync_api import Page
@@ -23,67 +21,12 @@ VIEWPORT = {"width": 1400, "height": 900}
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE_CSV = ROOT / "app" / "data" / "example_nox.csv"
 ARTIFACTS = ROOT / "tests" / "artifacts"
-SERVER_START_S = 120.0
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def mapwise_command() -> list[str]:
-    script = Path(sys.executable).with_name("mapwise")
-    return [str(script)] if script.exists() else [sys.executable, "-m", "app.cli"]
-
-
-@dataclass
-class Server:
-    url: str
-    process: subprocess.Popen[bytes]
-    log: Path
-
-    def api(self) -> httpx.Client:
-        return httpx.Client(base_url=self.url, timeout=60.0)
-
-    def stop(self) -> None:
-        self.process.terminate()
-        try:
-            self.process.wait(timeout=15)
-        except subprocess.TimeoutExpired:
-            self.process.kill()
 
 
 def start_server(workdir: Path) -> Server:
-    """``mapwise serve`` on a free port and a new SQLite file (no demo data); waits for
-    ``/api/health``."""
-    port = free_port()
-    log = workdir / "server.log"
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    env.pop("MAPWISE_REQUIRE_AUTH", None)
-    database = f"sqlite:///{workdir / 'db.sqlite'}"
-    process = subprocess.Popen(
-        [*mapwise_command(), "serve", "--port", str(port), "--database-url", database, "--no-demo"],
-        cwd=workdir,
-        stdout=log.open("wb"),
-        stderr=subprocess.STDOUT,
-        env=env,
-    )
-    url = f"http://127.0.0.1:{port}"
-    deadline = time.monotonic() + SERVER_START_S
-    while time.monotonic() < deadline:
-        if process.poll() is not None:
-            raise RuntimeError(f"mapwise serve exited:\n{log.read_text()[-3000:]}")
-        try:
-            if httpx.get(f"{url}/api/health", timeout=1.0).status_code == 200:
-                return Server(url, process, log)
-        except httpx.HTTPError:
-            pass
-        time.sleep(0.2)
-    process.kill()
-    raise RuntimeError(
-        f"mapwise serve did not answer in {SERVER_START_S} s:\n{log.read_text()[-3000:]}"
-    )
+    """``mapwise serve`` on a free port and a new SQLite file in ``workdir`` (no demo data);
+    returns once ``/api/health`` answers."""
+    return Server(f"sqlite:///{workdir / 'db.sqlite'}")
 
 
 def upload_example(api: httpx.Client, name: str) -> dict:

@@ -191,10 +191,8 @@ def test_format_comes_from_magic_bytes_not_the_name() -> None:
     assert info.value.code == "unsupported_format"
 
 
-def test_large_log_parses_quickly_and_exactly() -> None:
-    """100 000 rows × 12 channels round-trip bit-exactly, without a per-line slow path."""
-    import time
-
+def test_large_log_parses_exactly() -> None:
+    """100 000 rows × 12 channels round-trip bit-exactly."""
     from app.io.export import series_to_csv
 
     rng = np.random.default_rng(0)
@@ -202,14 +200,11 @@ def test_large_log_parses_quickly_and_exactly() -> None:
     t = np.arange(n) * 0.01
     channels = {f"c{i}": ("V", rng.normal(size=n) * 10 ** (i - 6)) for i in range(12)}
     text = series_to_csv(t, channels).encode()
-    start = time.perf_counter()
-    ds = ingest(text)
-    elapsed = time.perf_counter() - start
+    ds = ingest(text)  # its speed: scripts/bench_service.py (a 360 000-row upload)
     assert ds.rows == n
     np.testing.assert_array_equal(ds.signals.time, t)
     for name, (_, values) in channels.items():
         np.testing.assert_array_equal(ds.signals[name], values)
-    assert elapsed < 10  # ~1 s on the shared 2-core dev box
 
 
 def test_spooled_upload_file_is_read_from_its_position() -> None:

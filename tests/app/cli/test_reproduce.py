@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from app.cli import main
+from app.cli.run import execute_scenario, run_scenario
 from app.reproduce import paper_values as pv
 from app.reproduce import runner
 from app.reproduce.ekf import build as build_ekf
@@ -16,8 +17,7 @@ from app.reproduce.lpv import build as build_lpv
 from app.reproduce.report import num, pct
 from app.reproduce.skf_sims import TOLERANCE
 from app.reproduce.torque import build as build_torque
-from app.scenario_run import execute_scenario, run_scenario
-from estimation.estimator import registry
+from estimation.registry import registry
 
 
 def run(args: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
@@ -74,6 +74,7 @@ def test_skf_section_default_dir_and_numbers_of_mapwise_run(
     assert "<table>" in html
 
 
+@pytest.mark.slow
 def test_torque_tables_beside_the_papers(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -111,6 +112,7 @@ def test_torque_tables_beside_the_papers(
     assert "Figure (interactive, in report.html):* torque-si (seed 1)" in md
 
 
+@pytest.mark.slow
 def test_nox_and_lpv_scores_are_mapwise_runs(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -144,6 +146,7 @@ def test_nox_and_lpv_scores_are_mapwise_runs(
     assert "5.28 %" in md
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(
     not {"ekf-def", "ekf-aug", "ekf-map"} <= set(registry()), reason="EKF not registered yet"
 )

@@ -13,7 +13,7 @@ from fastapi.testclient import TestClient
 
 from app.cli import main as cli_main
 from app.db.migrate import head_revision
-from tests.app.service.helpers import (
+from tests.support.helpers import (
     TABLE,
     TRUE_MAP,
     U1,

@@ -12,7 +12,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.api import create_app
-from tests.app.service.helpers import service_settings, upload
+from tests.support.helpers import service_settings, upload
 
 
 def _mcap(

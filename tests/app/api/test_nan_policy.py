@@ -11,7 +11,7 @@ from typing import Any
 import pytest
 from fastapi.testclient import TestClient
 
-from tests.app.service.helpers import TABLE, log_csv, upload_ok
+from tests.support.helpers import TABLE, log_csv, upload_ok
 
 NON_FINITE = ("NaN", "Infinity", "-Infinity")
 JSON = {"Content-Type": "application/json"}

@@ -12,7 +12,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.api import create_app
-from tests.app.service.helpers import (
+from tests.support.helpers import (
     TABLE,
     final_values,
     log_csv,
@@ -89,6 +89,7 @@ def test_a_failing_run_stores_its_message(client: TestClient) -> None:
     assert done["finished_at"] is not None
 
 
+@pytest.mark.slow
 def test_cancel_then_resume_gives_the_uninterrupted_map(client: TestClient) -> None:
     text = log_csv(3000, seed=7, rate_hz=100.0)
     dataset = upload_ok(client, text)
@@ -129,12 +130,13 @@ def test_pace_replays_in_real_time_multiples(client: TestClient) -> None:
     dataset = upload_ok(client, log_csv(1000, seed=8, rate_hz=100.0))  # 10 s of log
     run = start_run(client, run_body(dataset["id"], pace=5))  # about 2 s
     started = wait_run(client, run["id"], until=("running", "succeeded"))
-    t0 = time.monotonic()
     done = wait_run(client, run["id"])
-    elapsed = time.monotonic() - t0
     assert done["status"] == "succeeded"
     assert started["status"] == "running"
-    assert 1.2 < elapsed < 6.0
+    # Pacing is a lower bound only (a loaded machine is slower, never faster); how close a
+    # run keeps to its pace is `mapwise bench`'s business, not a pass/fail wall clock.
+    took = datetime.fromisoformat(done["finished_at"]) - datetime.fromisoformat(done["started_at"])
+    assert took.total_seconds() > 1.5
     fast = start_run(client, run_body(dataset["id"]))
     wait_run(client, fast["id"])
     assert final_values(client, fast["id"])["values"] == final_values(client, run["id"])["values"]
@@ -162,6 +164,7 @@ def eight_workers(backend: str, fresh_url) -> Iterator[TestClient]:  # type: ign
         yield c
 
 
+@pytest.mark.slow
 def test_eight_runs_at_once_complete_correctly(eight_workers: TestClient, tmp_path) -> None:  # type: ignore[no-untyped-def]
     client = eight_workers
     texts = [log_csv(2500, seed=20 + i) for i in range(2)]

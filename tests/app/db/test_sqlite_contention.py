@@ -8,14 +8,16 @@ import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 
+import pytest
 from fastapi.testclient import TestClient
 
 from app.api import create_app
 from app.db.engine import Database
 from app.db.repositories import RunRepo
-from tests.app.service.helpers import log_csv, run_body, service_settings, upload_ok
+from tests.support.helpers import log_csv, run_body, service_settings, upload_ok
 
 
+@pytest.mark.slow
 def test_twenty_submissions_and_ten_progress_writers_never_lock(fresh_url) -> None:  # type: ignore[no-untyped-def]
     url = fresh_url("sqlite")
     settings = service_settings(url)  # its two run workers write too

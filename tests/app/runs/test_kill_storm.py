@@ -11,14 +11,16 @@ import time
 from typing import Any
 
 import numpy as np
+import pytest
 
-from tests.app.service.helpers import log_csv, reference_run, run_body, start_run, upload_ok
-from tests.app.service.server import Server
+from tests.support.helpers import log_csv, reference_run, run_body, start_run, upload_ok
+from tests.support.server import Server
 
 KILLS = 50
 RUNS = 12
 
 
+@pytest.mark.slow
 def test_fifty_worker_kills_lose_and_double_nothing(backend: str, fresh_url, tmp_path: Any) -> None:  # type: ignore[no-untyped-def]
     env = {
         "MAPWISE_LOST_RUN_POLICY": "requeue",

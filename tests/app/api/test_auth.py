@@ -14,7 +14,7 @@ from starlette.websockets import WebSocketDisconnect
 from app.api import create_app
 from app.cli import main as cli_main
 from app.config import Settings
-from tests.app.service.helpers import service_settings
+from tests.support.helpers import service_settings
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,5 @@
-"""Builders and waiting helpers for the service tests."""
+"""Builders and waiting helpers for the service tests (in-process: a ``TestClient``); the
+request builders themselves live in :mod:`tests.support.server`, shared with ``scripts/``."""
 
 from __future__ import annotations
 
@@ -11,17 +12,14 @@ from fastapi.testclient import TestClient
 
 from app.config import Settings
 from app.io.csv_files import read_csv
-from estimation.estimator import get_spec
+from estimation.registry import get_spec
 from estimation.table import Axis, Table
+from tests.support.server import FINISHED, TABLE, U1, U2, run_body
 
-U1 = [500.0, 1500.0, 2500.0, 3500.0]
-U2 = [0.0, 20.0, 40.0, 60.0]
 TRUE_MAP = Table(
     [Axis("u1", "rpm", U1), Axis("u2", "mg/stroke", U2)],
     np.add.outer(np.array([1.0, 2.0, 3.5, 3.0]), np.array([0.0, 0.5, 1.5, 1.0])),
 )
-TABLE = {"axes": [{"name": "u1", "breakpoints": U1}, {"name": "u2", "breakpoints": U2}]}
-FINISHED = ("succeeded", "failed", "cancelled", "interrupted")
 
 
 def log_csv(n: int = 3000, seed: int = 0, rate_hz: float = 50.0) -> str:
@@ -45,17 +43,6 @@ def upload_ok(client: TestClient, text: str | bytes, name: str = "log.csv") -> d
     response = upload(client, text, name)
     assert response.status_code == 201, response.text
     return response.json()
-
-
-def run_body(dataset_id: int, estimator: str = "skf", **config: Any) -> dict[str, Any]:
-    base = {"sigma_w": 0.01, "sigma_v": 0.05, "p0": 10.0} if estimator in ("kf", "skf") else {}
-    return {
-        "dataset_id": dataset_id,
-        "estimator": estimator,
-        "signals": {"y": "y"},
-        "table": TABLE,
-        "config": base | config,
-    }
 
 
 def start_run(client: TestClient, body: dict[str, Any]) -> dict[str, Any]:

@@ -1,4 +1,9 @@
-"""A real ``mapwise serve`` (uvicorn) in a subprocess, for the WebSocket and kill tests."""
+"""A real ``mapwise serve`` (uvicorn) in a subprocess, and what its clients share: a free port
+and the body of a run request. Used by the real-process tests (WebSocket, kill, load, Dask),
+the browser tests (tests/frontend/browser.py) and the scripts that start a server
+(scripts/load.py, bench_service.py, bench_scaleout.py, screenshot.py, bench_dashboard.py),
+which put the repository root on ``sys.path`` to import it. Only httpx is needed here.
+"""
 
 from __future__ import annotations
 
@@ -14,24 +19,53 @@ from typing import Any
 
 import httpx
 
-ROOT = Path(__file__).resolve().parents[3]
+ROOT = Path(__file__).resolve().parents[2]
+U1 = [500.0, 1500.0, 2500.0, 3500.0]
+U2 = [0.0, 20.0, 40.0, 60.0]
+TABLE = {"axes": [{"name": "u1", "breakpoints": U1}, {"name": "u2", "breakpoints": U2}]}
+FINISHED = ("succeeded", "failed", "cancelled", "interrupted")
 
 
 def free_port() -> int:
+    """A TCP port free on 127.0.0.1 now (the OS picks it; a server binds it right after)."""
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
 
 
+def run_body(
+    dataset_id: int,
+    estimator: str = "skf",
+    *,
+    signals: dict[str, str] | None = None,
+    table: dict[str, Any] | None = None,
+    **config: Any,
+) -> dict[str, Any]:
+    """A ``POST /api/runs`` body: the estimator on output ``y`` over the 4×4 ``u1``×``u2``
+    table by default; the Kalman filters get small default noises that ``config`` overrides."""
+    base = {"sigma_w": 0.01, "sigma_v": 0.05, "p0": 10.0} if estimator in ("kf", "skf") else {}
+    return {
+        "dataset_id": dataset_id,
+        "estimator": estimator,
+        "signals": {"y": "y"} if signals is None else signals,
+        "table": TABLE if table is None else table,
+        "config": base | config,
+    }
+
+
 class Server:
-    """``python -m app.cli serve`` on a free port; ``kill()`` is ``kill -9``."""
+    """``python -m app.cli serve`` on a free port; ``kill()`` is ``kill -9``.
+
+    ``env`` adds to the inherited environment, from which ``MAPWISE_REQUIRE_AUTH`` is dropped
+    (a developer's shell must not lock the tests out); the server's output goes to a
+    temporary log, :meth:`output` gives its tail and :meth:`stop` deletes it."""
 
     def __init__(
         self,
         database_url: str,
         *,
         demo: bool = False,
-        workers: int = 2,
+        workers: int | None = 2,
         log_level: str = "warning",
         env: dict[str, str] | None = None,
     ) -> None:
@@ -42,20 +76,36 @@ class Server:
         args = [
             sys.executable, "-m", "app.cli", "serve",
             "--host", "127.0.0.1", "--port", str(self.port),
-            "--database-url", database_url, "--workers", str(workers), "--log-level", log_level,
+            "--database-url", database_url, "--log-level", log_level,
         ]  # fmt: skip
+        if workers is not None:  # None: the app's default (one per core, 2 to 8)
+            args += ["--workers", str(workers)]
         if not demo:
             args.append("--no-demo")
-        env = os.environ | {"MAPWISE_CANCEL_POLL_S": "0.05"} | (env or {})
+        inherited = {k: v for k, v in os.environ.items() if k != "MAPWISE_REQUIRE_AUTH"}
+        defaults = {"MAPWISE_CANCEL_POLL_S": "0.05", "PYTHONUNBUFFERED": "1"}
         self.log = tempfile.NamedTemporaryFile(  # noqa: SIM115 - closed in stop()
             "w+", prefix="mapwise-serve-", suffix=".log", delete=False
         )
         self.process = subprocess.Popen(
-            args, cwd=ROOT, env=env, stdout=self.log, stderr=subprocess.STDOUT,
-            start_new_session=True,
+            args, cwd=ROOT, env=inherited | defaults | (env or {}), stdout=self.log,
+            stderr=subprocess.STDOUT, start_new_session=True,
         )  # fmt: skip
+        self._last_output = ""
         self.http = httpx.Client(base_url=self.base, timeout=30)
-        self._wait_ready()
+        try:
+            self._wait_ready()
+        except BaseException:
+            self.stop()
+            raise
+
+    @property
+    def url(self) -> str:
+        return self.base
+
+    def api(self, timeout: float = 60.0) -> httpx.Client:
+        """A new client of the server (the caller closes it), for another thread, say."""
+        return httpx.Client(base_url=self.base, timeout=timeout)
 
     def _wait_ready(self, timeout: float = 90.0) -> None:
         deadline = time.monotonic() + timeout
@@ -71,6 +121,9 @@ class Server:
         raise RuntimeError(f"server not ready after {timeout} s: {self.output()}")
 
     def output(self) -> str:
+        """The tail of the server's log (kept after :meth:`stop`)."""
+        if self.log.closed:
+            return self._last_output
         self.log.flush()
         return Path(self.log.name).read_text()[-3000:]
 
@@ -117,7 +170,10 @@ class Server:
                 self.process.kill()
                 self.process.wait(timeout=10)
         self.http.close()
-        self.log.close()
+        if not self.log.closed:
+            self._last_output = self.output()
+            self.log.close()
+            Path(self.log.name).unlink(missing_ok=True)
 
     def get(self, path: str, **kwargs: Any) -> Any:
         response = self.http.get(path, **kwargs)

@@ -21,7 +21,9 @@ from pathlib import Path
 import httpx
 import pytest
 
-from tests.app.service.server import Server
+from tests.support.server import Server
+
+pytestmark = pytest.mark.slow  # gigabyte streams against a real server
 
 LIMIT_MB = 64
 

@@ -12,9 +12,10 @@ from typing import Any
 
 import httpx
 import numpy as np
+import pytest
 
-from tests.app.service.helpers import log_csv, reference_run, run_body, start_run, upload_ok
-from tests.app.service.server import Server
+from tests.support.helpers import log_csv, reference_run, run_body, start_run, upload_ok
+from tests.support.server import Server
 
 
 def _restart_postgresql() -> None:
@@ -26,6 +27,8 @@ def _restart_postgresql() -> None:
     )
 
 
+@pytest.mark.slow
+@pytest.mark.postgres
 def test_a_postgresql_restart_mid_run_is_survived(fresh_url, tmp_path: Any) -> None:  # type: ignore[no-untyped-def]
     srv = Server(fresh_url("postgresql"))
     statuses: list[int] = []

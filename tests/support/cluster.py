@@ -11,7 +11,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from tests.app.service.server import ROOT, free_port
+from tests.support.server import ROOT, free_port
 
 DASK = str(Path(sys.executable).with_name("dask"))
 

@@ -4,10 +4,13 @@ no error, no lost run, live frames delivered, p99 latency bounded."""
 
 from __future__ import annotations
 
+import pytest
+
 from scripts.load import run_load
-from tests.app.service.server import Server
+from tests.support.server import Server
 
 
+@pytest.mark.soak
 def test_concurrent_users_get_no_errors_and_lose_no_run(backend: str, fresh_url) -> None:  # type: ignore[no-untyped-def]
     server = Server(fresh_url(backend))
     try:
@@ -21,6 +24,7 @@ def test_concurrent_users_get_no_errors_and_lose_no_run(backend: str, fresh_url)
     assert result["p99_ms"] < 2000, result
 
 
+@pytest.mark.soak
 def test_a_short_soak_with_streaming_runs(fresh_url) -> None:  # type: ignore[no-untyped-def]
     """The soak of README in short: users plus long runs streamed throughout; no error, no
     lost run, live frames reach their viewers within a second."""

@@ -8,7 +8,7 @@ from fastapi.testclient import TestClient
 
 from app.services.sweeps import Range, expand_parameters
 from estimation.merge import merge_maps
-from tests.app.service.helpers import (
+from tests.support.helpers import (
     TABLE,
     final_values,
     log_csv,
@@ -41,6 +41,7 @@ def _wait_group(client: TestClient, path: str) -> dict:
         time.sleep(0.1)
 
 
+@pytest.mark.slow
 def test_a_grid_sweep_runs_every_point_and_ranks_them(client: TestClient, tmp_path) -> None:  # type: ignore[no-untyped-def]
     text = log_csv(2000, seed=60)
     dataset = upload_ok(client, text)
@@ -141,13 +142,14 @@ def test_expand_parameters_grid_and_errors() -> None:
         expand_parameters({"a": Range(min=2, max=1)}, samples=2, seed=0)
 
 
+@pytest.mark.slow
 def test_mapwise_sweep_cli_against_a_real_server(
     backend: str,
     fresh_url,  # type: ignore[no-untyped-def]
     capsys: pytest.CaptureFixture[str],
 ) -> None:
     from app.cli import main as cli_main
-    from tests.app.service.server import Server
+    from tests.support.server import Server
 
     srv = Server(fresh_url(backend))
     try:

@@ -1,4 +1,4 @@
-"""Fixtures of the service tests: every API test runs on SQLite and on PostgreSQL.
+"""Fixtures of the app tests: every service test runs on SQLite and on PostgreSQL.
 
 Each backend gets a fresh database per test module, migrated from empty by the app's own
 start-up, and one real app (TestClient: real ASGI app, lifespan, process pool). PostgreSQL
@@ -8,7 +8,6 @@ is the local server (127.0.0.1:5432, trust auth, user postgres); a database
 
 from __future__ import annotations
 
-import secrets
 import warnings
 from collections.abc import Iterator
 from pathlib import Path
@@ -20,42 +19,11 @@ warnings.filterwarnings("ignore", message=".*httpx.*starlette.testclient.*")
 from fastapi.testclient import TestClient  # noqa: E402
 
 from app.api import create_app  # noqa: E402
-from tests.app.service.helpers import service_settings  # noqa: E402
+from tests.support.databases import PgDatabases  # noqa: E402
+from tests.support.helpers import service_settings  # noqa: E402
 
-PG_ADMIN = "host=127.0.0.1 port=5432 user=postgres dbname=test"
-PG_URL = "postgresql+psycopg://postgres@127.0.0.1:5432/{name}"
-BACKENDS = ("sqlite", "postgresql")
-
-
-def pg_connect():  # type: ignore[no-untyped-def]
-    import psycopg
-
-    try:
-        return psycopg.connect(PG_ADMIN, autocommit=True, connect_timeout=5)
-    except psycopg.OperationalError as exc:
-        pytest.fail(
-            f"PostgreSQL is not reachable at 127.0.0.1:5432 ({exc}); start it with "
-            "`pg_ctlcluster --skip-systemctl-redirect $(ls /etc/postgresql) main start`"
-        )
-
-
-class PgDatabases:
-    """Creates fresh PostgreSQL databases and drops them all at the end."""
-
-    def __init__(self) -> None:
-        self.names: list[str] = []
-
-    def create(self) -> str:
-        name = f"mapwise_test_{secrets.token_hex(4)}"
-        with pg_connect() as conn:
-            conn.execute(f'CREATE DATABASE "{name}"')
-        self.names.append(name)
-        return PG_URL.format(name=name)
-
-    def drop_all(self) -> None:
-        with pg_connect() as conn:
-            for name in self.names:
-                conn.execute(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)')
+# The PostgreSQL half carries the ``postgres`` marker, so ``-m "not postgres"`` keeps SQLite.
+BACKENDS = ("sqlite", pytest.param("postgresql", marks=pytest.mark.postgres))
 
 
 @pytest.fixture(scope="session")
@@ -97,4 +65,4 @@ def client(database_url: str) -> Iterator[TestClient]:
 
 @pytest.fixture
 def example_csv() -> Path:
-    return Path(__file__).resolve().parents[3] / "app" / "data" / "example_nox.csv"
+    return Path(__file__).resolve().parents[2] / "app" / "data" / "example_nox.csv"

@@ -193,7 +193,7 @@ def test_shipped_example_learns_the_nox_map(capsys: pytest.CaptureFixture[str]) 
     """The first-run demo: the SKF learns the visited part of the true NOx map."""
     from estimation.plants.nox import nox_base_map
 
-    example = Path(__file__).resolve().parents[2] / "app" / "data" / "example_nox.csv"
+    example = Path(__file__).resolve().parents[3] / "app" / "data" / "example_nox.csv"
     truth = nox_base_map()
     axes = [f"--axis={a.name}=" + ",".join(f"{b:g}" for b in a.breakpoints) for a in truth.axes]
     code, out, _ = run(

@@ -16,7 +16,9 @@ from schemathesis.specs.openapi.checks import (
     status_code_conformance,
 )
 
-from tests.app.service.server import Server
+from tests.support.server import Server
+
+pytestmark = pytest.mark.slow  # hypothesis drives every operation of a real server
 
 CHECKS = (
     not_a_server_error,

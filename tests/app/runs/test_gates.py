@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from app.io.errors import InputError
-from app.services.gates import (
+from app.runs.gates import (
     HoldoffGate,
     RangeGate,
     RateGate,

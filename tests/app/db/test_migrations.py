@@ -26,7 +26,7 @@ def _drift(url: str) -> list:
 def test_one_head() -> None:
     script = ScriptDirectory.from_config(alembic_config("sqlite://"))
     assert script.get_heads() == [head_revision()]
-    assert head_revision() == "0004"
+    assert head_revision() == "0005"
 
 
 def test_upgraded_empty_database_matches_the_models(backend: str, fresh_url) -> None:  # type: ignore[no-untyped-def]

@@ -21,9 +21,9 @@ import numpy as np
 import pytest
 from websockets.sync.client import connect
 
-from tests.app.service.cluster import DaskCluster
-from tests.app.service.helpers import log_csv, reference_run, run_body, start_run, upload_ok
-from tests.app.service.server import Server
+from tests.support.cluster import DaskCluster
+from tests.support.helpers import log_csv, reference_run, run_body, start_run, upload_ok
+from tests.support.server import Server
 
 TERMINAL = ("succeeded", "failed", "cancelled", "interrupted")
 
@@ -49,6 +49,8 @@ def _final(server: Server, run_id: int) -> np.ndarray:
     return np.array(server.get(f"/api/runs/{run_id}/export", params={"format": "json"})["values"])
 
 
+@pytest.mark.dask
+@pytest.mark.postgres
 def test_runs_on_dask_equal_the_estimator_run_directly(
     cluster: DaskCluster, database: str, tmp_path: Any
 ) -> None:
@@ -68,6 +70,8 @@ def test_runs_on_dask_equal_the_estimator_run_directly(
         server.stop()
 
 
+@pytest.mark.dask
+@pytest.mark.postgres
 def test_live_frames_reach_a_viewer_on_another_api_process(
     cluster: DaskCluster, database: str
 ) -> None:
@@ -92,6 +96,8 @@ def test_live_frames_reach_a_viewer_on_another_api_process(
         watcher.stop()
 
 
+@pytest.mark.dask
+@pytest.mark.postgres
 def test_a_killed_worker_mid_run_is_resumed_elsewhere_once(
     cluster: DaskCluster, database: str, tmp_path: Any
 ) -> None:
@@ -118,6 +124,8 @@ def test_a_killed_worker_mid_run_is_resumed_elsewhere_once(
         server.stop()
 
 
+@pytest.mark.dask
+@pytest.mark.postgres
 def test_a_worker_killed_mid_sweep_loses_no_run_and_doubles_none(
     cluster: DaskCluster, database: str, tmp_path: Any
 ) -> None:
@@ -157,6 +165,8 @@ def test_a_worker_killed_mid_sweep_loses_no_run_and_doubles_none(
         server.stop()
 
 
+@pytest.mark.dask
+@pytest.mark.postgres
 def test_the_api_process_killed_mid_sweep_loses_no_run(
     cluster: DaskCluster, database: str, tmp_path: Any
 ) -> None:

@@ -19,8 +19,10 @@ from typing import Any
 import pytest
 from websockets.sync.client import connect
 
-from tests.app.service.helpers import log_csv, run_body
-from tests.app.service.server import Server, is_dead
+from tests.support.helpers import log_csv, run_body
+from tests.support.server import Server, is_dead
+
+pytestmark = pytest.mark.slow  # real servers killed, stopped and restarted
 
 LIVE_FPS = 20
 

@@ -27,7 +27,7 @@ from app.db.repositories import RunRepo
 from app.errors import SupersededError
 from app.runs.executor import dead_local_owner, local_owner
 from app.runs.worker import WorkerContext, execute_run
-from tests.app.service.helpers import (
+from tests.support.helpers import (
     final_values,
     log_csv,
     run_body,
@@ -36,7 +36,7 @@ from tests.app.service.helpers import (
     upload_ok,
     wait_run,
 )
-from tests.app.service.server import Server
+from tests.support.server import Server
 
 
 def _age(url: str, run_id: int, *, seconds: float, heartbeat: bool = True) -> None:
@@ -83,6 +83,7 @@ def test_fence_refuses_a_superseded_attempt(database_url: str, client: TestClien
         db.dispose()
 
 
+@pytest.mark.slow
 def test_a_newer_attempt_supersedes_the_running_one(database_url: str, client: TestClient) -> None:
     text = log_csv(3000, seed=41, rate_hz=100.0)  # 30 s of log
     dataset = upload_ok(client, text)
@@ -131,6 +132,7 @@ def _stopped_mid_run(client: TestClient, dataset_id: int) -> int:
     return int(run["id"])
 
 
+@pytest.mark.slow
 def test_sweep_requeues_silent_attempts_and_one_that_never_beat(requeue_client) -> None:  # type: ignore[no-untyped-def]
     client, url = requeue_client
     dataset = upload_ok(client, log_csv(1500, seed=42, rate_hz=100.0))
@@ -180,6 +182,7 @@ def test_owner_ids_tell_dead_local_processes() -> None:
     assert not dead_local_owner("dask:tcp://scheduler:8786")
 
 
+@pytest.mark.slow
 def test_a_poison_run_fails_after_three_lost_attempts(backend: str, fresh_url) -> None:  # type: ignore[no-untyped-def]
     env = {"MAPWISE_LOST_RUN_POLICY": "requeue", "MAPWISE_MAX_LOST_ATTEMPTS": "3"}
     srv = Server(fresh_url(backend), workers=1, env=env)
@@ -205,15 +208,20 @@ def test_a_poison_run_fails_after_three_lost_attempts(backend: str, fresh_url) -
         srv.stop()
 
 
+@pytest.mark.slow
 def test_two_servers_on_one_database_leave_each_others_runs_alone(
     backend: str,
     fresh_url,  # type: ignore[no-untyped-def]
 ) -> None:
+    """The run is paced to outlast any server start-up (30 s of log at 0.1× is 300 s), so the
+    checks wait on conditions, never on the clock: it is running while the second server
+    starts and stops, its attempt then writes its next version, and it obeys a cancel."""
     url = fresh_url(backend)
     first = Server(url)
     try:
         dataset = upload_ok(first.http, log_csv(3000, seed=45, rate_hz=100.0))
-        run_id = int(start_run(first.http, run_body(dataset["id"], pace=3))["id"])  # 10 s
+        body = run_body(dataset["id"], pace=0.1, version_every={"seconds": 0.2})  # one per 2 s
+        run_id = int(start_run(first.http, body)["id"])
         first.wait_run(run_id, ("running",))
         second = Server(url)  # its start-up sweep must not touch the first one's run
         try:
@@ -222,8 +230,11 @@ def test_two_servers_on_one_database_leave_each_others_runs_alone(
             second.stop()  # nor its shutdown
         run = first.get(f"/api/runs/{run_id}")
         assert run["status"] == "running", run
-        assert first.wait_run(run_id, ("succeeded", "failed", "interrupted"))["status"] == (
-            "succeeded"
-        )
+        assert (run["attempt"], run["lost_attempts"]) == (1, 0), run
+        first.wait_versions(run_id, run["n_versions"] + 1)  # the first attempt still writes
+        assert first.post(f"/api/runs/{run_id}/cancel").status_code == 200
+        done = first.wait_run(run_id, ("succeeded", "failed", "cancelled", "interrupted"))
+        assert done["status"] == "cancelled", done
+        assert (done["attempt"], done["lost_attempts"]) == (1, 0), done
     finally:
         first.stop()
