@@ -17,6 +17,26 @@ from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 DEFAULT_DATABASE_URL = "sqlite:///./mapwise.db"
 
 
+def physical_memory_mb() -> float | None:
+    """The machine's physical memory in MiB, or ``None`` where the OS does not say."""
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2**20
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def default_run_memory_mb(run_workers: int) -> float:
+    """A quarter of physical memory shared by the run workers, 512 MiB to 4 GiB per run.
+
+    With the quarter split between the workers, all of them at their budget still leave
+    three quarters of the host to the API, the database and everything else.
+    """
+    total = physical_memory_mb()
+    if total is None:
+        return 1024.0
+    return float(max(512, min(4096, int(0.25 * total / max(1, run_workers)))))
+
+
 class Settings(BaseSettings):
     """Everything the service can be told; every field is ``MAPWISE_<NAME>`` in the env."""
 
@@ -89,12 +109,70 @@ class Settings(BaseSettings):
     max_lost_attempts: int = Field(
         3, ge=1, le=100, description="Lost attempts after which a run fails (a poison run)."
     )
+    run_memory_mb: float = Field(
+        default_factory=lambda data: default_run_memory_mb(data.get("run_workers", 2)),
+        ge=256,
+        description="Memory budget of one run, in MiB: runs predicted to need more are "
+        "refused at creation, and each run worker is held to it by the OS. Default: a "
+        "quarter of physical memory divided by run_workers, 512 to 4096.",
+    )
+    run_max_s: float = Field(
+        6 * 3600.0,
+        gt=0,
+        description="Wall-clock budget of one run attempt, in seconds: a paced run predicted "
+        "to take longer is refused, and an attempt that overruns it fails.",
+    )
+    max_cells: int = Field(
+        250_000,
+        ge=1,
+        le=10_000_000,
+        description="Most cells of a table or base map (estimators may declare a lower cap).",
+    )
+    run_versions_mb: float = Field(
+        512.0,
+        gt=0,
+        description="Most bytes of stored map versions one run may write, in MiB.",
+    )
+
+    allowed_hosts: Annotated[list[str] | None, NoDecode] = Field(
+        None,
+        description="Host names the server answers to (comma-separated in the env; `*` "
+        "turns the check off). Any other Host header gets 400, which defeats DNS rebinding. "
+        "Default: localhost, 127.0.0.1 and [::1], plus `host` when it is not a wildcard.",
+    )
+    max_viewers_per_run: int = Field(
+        100, ge=1, le=100_000, description="Most live WebSocket viewers of one run."
+    )
+    max_viewers_per_client: int = Field(
+        200,
+        ge=1,
+        le=100_000,
+        description="Most live WebSocket viewers from one client address (all runs).",
+    )
+    max_viewers: int = Field(
+        500, ge=1, le=1_000_000, description="Most live WebSocket viewers of the server."
+    )
 
     @field_validator("cors_origins", mode="before")
     @classmethod
     def _split_origins(cls, value: object) -> object:
         if isinstance(value, str):
             return [o.strip() for o in value.split(",") if o.strip()]
+        return value
+
+    @field_validator("allowed_hosts", mode="before")
+    @classmethod
+    def _split_hosts(cls, value: object) -> object:
+        if isinstance(value, str):
+            value = value.split(",")
+        if isinstance(value, list | tuple):
+            hosts = [_host_name(str(h)) for h in value if str(h).strip()]
+            for host in hosts:
+                if "*" in host[1:] or (
+                    host.startswith("*") and host != "*" and not host.startswith("*.")
+                ):
+                    raise ValueError(f"{host!r}: a wildcard must be `*` or like `*.example.com`")
+            return hosts
         return value
 
     @field_validator("database_url")
@@ -134,6 +212,17 @@ class Settings(BaseSettings):
         return self
 
     @property
+    def trusted_hosts(self) -> list[str]:
+        """The Host names requests may carry (``["*"]``: any)."""
+        if self.allowed_hosts is not None:
+            return list(self.allowed_hosts)
+        hosts = ["localhost", "127.0.0.1", "[::1]"]
+        own = _host_name(self.host)
+        if own not in hosts and own not in ("0.0.0.0", "[::]", ""):
+            hosts.append(own)
+        return hosts
+
+    @property
     def auth_required(self) -> bool:
         return bool(self.require_auth) or not is_loopback(self.host)
 
@@ -148,6 +237,14 @@ class Settings(BaseSettings):
     @property
     def backend(self) -> Literal["sqlite", "postgresql"]:
         return "sqlite" if self.database_url.startswith("sqlite") else "postgresql"
+
+
+def _host_name(host: str) -> str:
+    """A Host-header name as Starlette compares it: lower case, IPv6 in brackets."""
+    host = host.strip().lower()
+    if ":" in host and not host.startswith("["):
+        return f"[{host}]"
+    return host
 
 
 def is_loopback(host: str) -> bool:

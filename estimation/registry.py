@@ -1,8 +1,10 @@
 """The registry of estimators: one :class:`EstimatorSpec` per name, the home of the contract.
 
 A spec says what an estimator is (title, description, paper, :class:`EstimatorKind`), how
-to build it (a pydantic config model and a factory), what its state is (``state_class``)
-and the unit of every per-sample series it yields (``output_units``). Everything that lists
+to build it (a pydantic config model and a factory), what its state is (``state_class``),
+the unit of every per-sample series it yields (``output_units``) and what a run of it costs
+(:class:`Cost`: memory and work as functions of the table size and the log length, which the
+service's admission control checks before it stores a run). Everything that lists
 estimators — the CLI choices, the catalog, the scenarios, the state loader — derives from
 :func:`registry`; adding an estimator is one line in :data:`BUILTIN`
 (``docs/adding-an-estimator.md``).
@@ -11,8 +13,9 @@ estimators — the CLI choices, the catalog, the scenarios, the state loader —
 from __future__ import annotations
 
 import importlib
+import math
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import StrEnum
 from functools import cache
 from types import MappingProxyType
@@ -38,6 +41,93 @@ ROLES = ("axis", "output", "input")
 """Signal roles: table axes (operating point), measured outputs fed back, other inputs."""
 
 
+FLOAT_BYTES = 8
+STATE_COPIES = 9
+"""Live copies of the state, in floats, while a version is persisted: the state and the
+kernel's working copy (2), ``to_dict``'s Python list (a float object and a list slot: 4),
+the array rebuilt from it (1) and the ``.npz`` buffer and its bytes (2)."""
+CELL_FLOATS = 40
+"""Floats per cell a run keeps besides the state: visits, rejection counts per reason, the
+reported table and variance, a version's arrays and a live frame's nested lists (Python
+floats, 4 slots each, for values, variances and visits)."""
+VERSION_CELL_ARRAYS = 5
+"""Per-cell arrays of one stored map version: values, variances, visits and two rejection
+counts (innovation, delay); the state blob comes on top."""
+
+
+@dataclass(frozen=True, slots=True)
+class Cost:
+    """What one run of an estimator costs, from the table's cells ``p``, the log's samples
+    ``n`` and the active elements per sample ``c`` (``2**d`` on a ``d``-axis table).
+
+    Memory, in bytes, of the run's data in the worker (the process itself not counted)::
+
+        memory = 8 · (STATE_COPIES · state(p, c) + CELL_FLOATS · p + per_sample(c) · n)
+
+    where ``state(p, c)`` is the floats in the estimator state (the full KF's P: ``p²``) and
+    ``per_sample(c)`` the floats kept per log sample (the per-sample outputs, status codes,
+    the prepared inputs and the regressor: the estimator's and the worker's copy). ``work``
+    is ``ops_per_sample(p, c) · n`` arithmetic operations (a lower bound on the run time at
+    any machine's speed). ``max_cells`` caps the table whatever the memory budget (``None``:
+    only the service's global cap).
+    """
+
+    state_floats: Callable[[int, int], float]
+    sample_floats: Callable[[int], float]
+    ops_per_sample: Callable[[int, int], float]
+    max_cells: int | None = None
+    size: Callable[[BaseModel], tuple[int, int]] = field(default=lambda c: table_size(c))
+
+    def memory_of(self, config: BaseModel, samples: int) -> int:
+        """:meth:`memory_bytes` at the size of a validated ``config``."""
+        cells, corners = self.size(config)
+        return self.memory_bytes(cells, samples, corners=corners)
+
+    def state_bytes(self, cells: int, *, corners: int = 1) -> int:
+        """Bytes of one serialised state (what each stored version's state blob holds)."""
+        return int(FLOAT_BYTES * self.state_floats(cells, corners))
+
+    def memory_bytes(self, cells: int, samples: int, *, corners: int = 1) -> int:
+        """Predicted peak bytes of a run's data (class docstring)."""
+        floats = (
+            STATE_COPIES * self.state_floats(cells, corners)
+            + CELL_FLOATS * cells
+            + self.sample_floats(corners) * samples
+        )
+        return int(FLOAT_BYTES * floats)
+
+    def work(self, cells: int, samples: int, *, corners: int = 1) -> float:
+        """Predicted arithmetic operations of a run."""
+        return float(self.ops_per_sample(cells, corners)) * samples
+
+    def version_bytes(self, cells: int, *, corners: int = 1) -> int:
+        """Bytes of one stored map version without its per-sample segment."""
+        return FLOAT_BYTES * VERSION_CELL_ARRAYS * cells + self.state_bytes(cells, corners=corners)
+
+
+def table_size(config: BaseModel) -> tuple[int, int]:
+    """``(cells, corners)`` of a config with ``axes`` (each with ``breakpoints``); ``(0, 1)``
+    without."""
+    axes = getattr(config, "axes", None) or []
+    return grid_size([len(a.breakpoints) for a in axes])
+
+
+def grid_size(lengths: list[int]) -> tuple[int, int]:
+    """``(cells, corners)`` of a grid with axes of these lengths (``(0, 1)`` for none)."""
+    if not lengths:
+        return 0, 1
+    return math.prod(lengths), 2 ** len(lengths)
+
+
+GENERIC_COST = Cost(
+    state_floats=lambda p, c: 2 * p + c * c + 64,
+    sample_floats=lambda c: 24 + 4 * c,
+    ops_per_sample=lambda p, c: 10 * c * c + 50,
+)
+"""A cautious default for an estimator that declares nothing: local updates over the active
+elements, a few dozen floats per sample."""
+
+
 @dataclass(frozen=True, slots=True)
 class EstimatorSpec:
     """A registered estimator: its name, what it is, where it comes from, how to build it.
@@ -57,6 +147,7 @@ class EstimatorSpec:
     state_class: type[EstimatorState]
     output_units: Mapping[str, str]
     produces_map: bool = True
+    cost: Cost = GENERIC_COST
 
     def config(self, config: BaseModel | dict[str, Any]) -> BaseModel:
         """``config`` validated against the estimator's model (a :class:`ConfigError` if not)."""
@@ -94,12 +185,15 @@ def family(
     kind: EstimatorKind,
     paper: str,
     produces_map: bool = True,
+    cost: Cost = GENERIC_COST,
 ) -> Callable[..., EstimatorSpec]:
     """The spec maker of a family of estimators built as ``estimator(name, config)``.
 
     ``make(name, title, description, config_model, state_class, output_units,
-    produces_map=…)`` gives one member's spec, with the family's kind and paper.
+    produces_map=…, cost=…)`` gives one member's spec, with the family's kind and paper
+    (and cost, unless the member declares its own).
     """
+    family_cost = cost
 
     def make(
         name: str,
@@ -110,6 +204,7 @@ def family(
         output_units: Mapping[str, str],
         *,
         produces_map: bool = produces_map,
+        cost: Cost = family_cost,
     ) -> EstimatorSpec:
         def factory(config: BaseModel) -> Estimator:
             if not isinstance(config, config_base):
@@ -118,7 +213,7 @@ def family(
 
         return EstimatorSpec(
             name, title, description, paper, kind, config_model, factory, state_class,
-            MappingProxyType(dict(output_units)), produces_map,
+            MappingProxyType(dict(output_units)), produces_map, cost,
         )  # fmt: skip
 
     return make

@@ -13,6 +13,7 @@ from typing import Any
 from app.errors import InvalidRequestError
 
 MAX_VERSIONS = 1000  # persisted versions per run (each carries the map and estimator state)
+MIN_PACE = 0.01  # slowest replay, × real time: a slower one holds a worker for ages
 
 
 @dataclass(frozen=True, slots=True)
@@ -30,15 +31,16 @@ def run_options(config: dict[str, Any], rows: int, rate_hz: float, fraction: flo
     if pace_raw == "max" or pace_raw is None:
         pace = None
     elif isinstance(pace_raw, int | float) and not isinstance(pace_raw, bool):
-        if not (math.isfinite(pace_raw) and pace_raw > 0):
+        if not (math.isfinite(pace_raw) and pace_raw >= MIN_PACE):
             raise InvalidRequestError(
-                f"pace must be 'max' or a positive real-time multiple, got {pace_raw!r}",
+                f"pace must be 'max' or a finite real-time multiple >= {MIN_PACE:g}, "
+                f"got {pace_raw!r}",
                 field="config.pace",
             )
         pace = float(pace_raw)
     else:
         raise InvalidRequestError(
-            f"pace must be 'max' or a positive real-time multiple, got {pace_raw!r}",
+            f"pace must be 'max' or a finite real-time multiple >= {MIN_PACE:g}, got {pace_raw!r}",
             field="config.pace",
         )
     every_raw = config.get("version_every")

@@ -8,11 +8,13 @@ from app.db.engine import Database
 from app.db.repositories import BaseMapRepo, RunRepo, VersionRepo
 from app.domain import BaseMap, Page
 from app.errors import ConflictError, InvalidRequestError
+from app.services.admission import OverBudgetError
 
 
 class BaseMapService:
-    def __init__(self, db: Database) -> None:
+    def __init__(self, db: Database, *, max_cells: int | None = None) -> None:
         self.db = db
+        self.max_cells = max_cells  # MAPWISE_MAX_CELLS; None: no cap
 
     def promote(self, *, run_id: int, version_id: int, name: str) -> BaseMap:
         with self.db.write() as s:
@@ -38,6 +40,12 @@ class BaseMapService:
         from app.io.export import import_map
 
         table = import_map(data, name=None)
+        if self.max_cells is not None and table.size > self.max_cells:
+            raise OverBudgetError(
+                f"the map has {table.size:,} cells ({' × '.join(map(str, table.shape))}) > "
+                f"{self.max_cells:,}, the cap (MAPWISE_MAX_CELLS)",
+                field="file",
+            )
         with self.db.write() as s:
             return BaseMapRepo(s).add(
                 name=_name(name or filename or "imported map"),

@@ -21,7 +21,8 @@ from app.domain import BaseMap, Dataset
 from app.errors import InvalidRequestError, field_of
 from app.io.columns import same_unit
 from app.runs.options import run_options
-from app.services.catalog import TABLE_ROLE, kind_of, needs_table, roles
+from app.services.admission import Limits, Prediction, admit_run, check_cells
+from app.services.catalog import TABLE_ROLE, EstimatorName, kind_of, needs_table, roles
 from estimation.errors import ConfigError, EstimationError
 from estimation.registry import EstimatorSpec, registry
 from estimation.table import Axis, Grid, broadcast_cells
@@ -52,7 +53,7 @@ class RunRequest(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     dataset_id: int = Field(ge=1, le=2**31 - 1)
-    estimator: str = Field(min_length=1)
+    estimator: EstimatorName
     signals: dict[str, str] = Field(
         default_factory=dict, description="Estimator signal role → dataset column."
     )
@@ -72,6 +73,7 @@ class RunPlan:
     produces_map: bool
     n_samples: int
     name: str
+    prediction: Prediction | None = None
 
 
 def _spec(name: str) -> EstimatorSpec:
@@ -128,7 +130,11 @@ def _axes(
 
 
 def locked_cells(raw: Any, shape: tuple[int, ...]) -> list[list[int]]:
-    """Locked cells as index lists from flat indices, a boolean mask or index lists."""
+    """Locked cells as index lists from flat indices, a boolean mask or index lists.
+
+    A boolean mask must have exactly the table's shape, and an index list one in-range
+    index per axis: anything else is refused rather than read another way.
+    """
     field = "config.locked"
     if raw is None or raw == []:
         return []
@@ -142,15 +148,49 @@ def locked_cells(raw: Any, shape: tuple[int, ...]) -> list[list[int]]:
                 f"flat cell indices {bad} are outside 0..{size - 1}", field=field
             )
         return [list(map(int, np.unravel_index(i, shape))) for i in raw]
-    arr = np.array(raw, dtype=object)
-    if arr.shape == shape and all(isinstance(v, bool) for v in arr.ravel()):
+    if _has_bool(raw):
+        mask_shape = _nested_shape(raw)
+        if mask_shape != shape:
+            raise InvalidRequestError(
+                f"a boolean lock mask must have the table's shape {list(shape)}, got "
+                f"{'a ragged mask' if mask_shape is None else list(mask_shape)}",
+                field=field,
+            )
+        arr = np.array(raw, dtype=object)
+        if not all(isinstance(v, bool) for v in arr.ravel()):
+            raise InvalidRequestError("a lock mask holds only true and false", field=field)
         return [list(map(int, ix)) for ix in np.argwhere(arr.astype(bool))]
     if all(isinstance(c, list) and all(isinstance(i, int) for i in c) for c in raw):
+        for k, cell in enumerate(raw):
+            if len(cell) != len(shape) or not all(
+                0 <= i < n for i, n in zip(cell, shape, strict=True)
+            ):
+                raise InvalidRequestError(
+                    f"cell {cell} is not inside a table of shape {list(shape)}",
+                    field=f"{field}[{k}]",
+                )
         return [list(c) for c in raw]
     raise InvalidRequestError(
         f"locked must be flat cell indices, index lists, or a boolean mask of shape {shape}",
         field=field,
     )
+
+
+def _has_bool(value: Any) -> bool:
+    if isinstance(value, list):
+        return any(_has_bool(v) for v in value)
+    return isinstance(value, bool)
+
+
+def _nested_shape(value: Any) -> tuple[int, ...] | None:
+    """The shape of regular nested lists (``()`` for a scalar), ``None`` if ragged."""
+    if not isinstance(value, list):
+        return ()
+    shapes = {_nested_shape(v) for v in value}
+    if len(shapes) > 1 or None in shapes:
+        return None
+    inner = shapes.pop() if shapes else ()
+    return (len(value), *inner)
 
 
 def plan_run(
@@ -159,8 +199,14 @@ def plan_run(
     base_map: BaseMap | None,
     *,
     version_fraction: float,
+    limits: Limits | None = None,
 ) -> RunPlan:
-    """Validate a run request against its dataset; raise 422 errors naming the field."""
+    """Validate a run request against its dataset; raise 422 errors naming the field.
+
+    With ``limits``, the run is also admitted (:mod:`app.services.admission`): its table's
+    cells are capped before anything of the table's size is built, and its predicted
+    memory, stored versions and duration checked before the estimator is.
+    """
     spec = _spec(request.estimator)
     kind = kind_of(spec)
     config = dict(request.config)
@@ -177,6 +223,9 @@ def plan_run(
     axes = _axes(request.table, base_map, dataset) if needs_table(spec) else None
     if request.table is not None and not needs_table(spec):
         raise InvalidRequestError(f"{spec.name} has no table", field="table")
+    if axes is not None and limits is not None:
+        cells = math.prod(len(a["breakpoints"]) for a in axes)
+        check_cells(cells, limits, field="table.axes", spec=spec)
     if kind == "table-filter":
         if axes is None:
             raise InvalidRequestError(f"{spec.name} needs a table grid", field="table")
@@ -219,6 +268,22 @@ def plan_run(
 
         parse_gates(options.gates, [c.name for c in dataset.channels], field="config.gates")
     model = _validate_config(spec, estimator_config)
+    _check_delay(model, dataset)
+    prediction = None
+    if limits is not None:
+        cells, corners = spec.cost.size(model)
+        prediction = admit_run(
+            spec,
+            cells=cells,
+            corners=corners,
+            samples=dataset.rows,
+            channels=len(dataset.channels),
+            version_every=options.version_every,
+            log_duration_s=dataset.duration_s,
+            pace=options.pace,
+            limits=limits,
+            table_field="table.axes" if axes is not None else "config",
+        )
     try:
         estimator = spec.build(model)
     except EstimationError as exc:
@@ -234,7 +299,28 @@ def plan_run(
         produces_map=spec.produces_map,
         n_samples=dataset.rows,
         name=request.name or f"{spec.name} on {dataset.name}",
+        prediction=prediction,
     )
+
+
+def _check_delay(model: BaseModel, dataset: Dataset) -> None:
+    """A sensor delay must be shorter than the log (else no sample has a measurement)."""
+    sensor = getattr(model, "sensor", None)
+    if sensor is None:
+        return
+    if sensor.delay_samples is not None:
+        if sensor.delay_samples >= dataset.rows:
+            raise InvalidRequestError(
+                f"a delay of {sensor.delay_samples:,} samples is not shorter than the log "
+                f"({dataset.rows:,} samples)",
+                field="config.sensor.delay_samples",
+            )
+    elif sensor.delay_s and sensor.delay_s >= dataset.duration_s:
+        raise InvalidRequestError(
+            f"a delay of {sensor.delay_s:g} s is not shorter than the log "
+            f"({dataset.duration_s:g} s)",
+            field="config.sensor.delay_s",
+        )
 
 
 def _start_values(

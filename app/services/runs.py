@@ -27,6 +27,7 @@ from app.io.decimate import stride_decimate
 from app.io.map_json import map_document
 from app.io.payload import unpack_signals
 from app.runs.frames import StatusFrame
+from app.services.admission import Limits
 from app.services.run_plan import RunRequest, plan_run
 from estimation.estimator import Snapshot
 from estimation.signals import Signals
@@ -101,7 +102,13 @@ class RunService:
         base_map = None
         if request.base_map_id is not None:
             base_map = BaseMapRepo(s).get(request.base_map_id)
-        plan = plan_run(request, dataset, base_map, version_fraction=self.settings.version_fraction)
+        plan = plan_run(
+            request,
+            dataset,
+            base_map,
+            version_fraction=self.settings.version_fraction,
+            limits=Limits.from_settings(self.settings),
+        )
         return RunRepo(s).add(
             dataset_id=dataset.id,
             name=plan.name,

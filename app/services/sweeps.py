@@ -25,6 +25,8 @@ from app.db.engine import Database
 from app.db.repositories import GroupRepo, RunRepo, VersionRepo
 from app.domain import Page, Run, RunGroup, RunStatus
 from app.errors import AppError, InvalidRequestError
+from app.services.admission import OverBudgetError
+from app.services.catalog import EstimatorName
 from app.services.overrides import merge
 from app.services.run_plan import RunRequest, TableSpec
 from app.services.runs import RunService
@@ -54,7 +56,7 @@ class SweepRequest(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     dataset_id: int = Field(ge=1, le=2**31 - 1)
-    estimator: str = Field(min_length=1)
+    estimator: EstimatorName
     signals: dict[str, str] = Field(default_factory=dict)
     table: TableSpec | None = None
     config: dict[str, Any] = Field(default_factory=dict, description="Fixed settings.")
@@ -80,7 +82,7 @@ class BatchRequest(BaseModel):
     dataset_ids: list[Annotated[int, Field(ge=1, le=2**31 - 1)]] = Field(
         min_length=1, max_length=MAX_GROUP_RUNS
     )
-    estimator: str = Field(min_length=1)
+    estimator: EstimatorName
     signals: dict[str, str] = Field(default_factory=dict)
     table: TableSpec | None = None
     config: dict[str, Any] = Field(default_factory=dict)
@@ -228,12 +230,16 @@ class SweepService:
             return self.runs.store_in(s, request, group_id=group_id, params=params)
         except (AppError, EstimationError) as exc:
             message = getattr(exc, "message", str(exc))
+            # an over-budget member keeps its code (over_budget), any other a validation error
+            error = type(exc) if isinstance(exc, InvalidRequestError) else InvalidRequestError
             if parameters and params:
                 values = ", ".join(f"{k}={v!r}" for k, v in params.items())
-                field = _parameter_field(getattr(exc, "field", None), message, params)
-                raise InvalidRequestError(f"with {values}: {message}", field=field) from exc
+                field = getattr(exc, "field", None)
+                if not (isinstance(exc, OverBudgetError) and field and "config." not in field):
+                    field = _parameter_field(field, message, params)
+                raise error(f"with {values}: {message}", field=field) from exc
             if index is not None:
-                raise InvalidRequestError(
+                raise error(
                     f"dataset {request.dataset_id}: {message}", field=f"dataset_ids[{index}]"
                 ) from exc
             raise

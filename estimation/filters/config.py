@@ -9,9 +9,17 @@ the dashboard renders as a form.
 
 from __future__ import annotations
 
+import math
+from collections.abc import Iterator
 from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+MAX_SIGMA = 1e75
+"""Largest standard deviation accepted (σw, σv, σf, the gate): its square, 1e150, leaves
+room for the products and sums of the covariance update without overflowing float64."""
+MAX_VARIANCE = 1e150
+"""Largest variance accepted (P0): ``P0²`` (the update's ``P w wᵀ P``) stays below 1e300."""
 
 CellValues = Annotated[
     float | list[Any],
@@ -21,6 +29,29 @@ CellValues = Annotated[
 
 class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+def _numbers(value: Any) -> Iterator[float]:
+    """The numbers in a scalar or nested lists (other items are the shape check's business)."""
+    if isinstance(value, list):
+        for item in value:
+            yield from _numbers(item)
+    elif isinstance(value, int | float) and not isinstance(value, bool):
+        yield float(value)
+
+
+def bounded(value: Any, limit: float = math.inf) -> Any:
+    """``value`` (a scalar or nested lists) if every number in it is finite with magnitude
+    at most ``limit``; else a ``ValueError`` quoting the first offender."""
+    for v in _numbers(value):
+        if not math.isfinite(v):
+            raise ValueError(f"must be finite, got {v!r}")
+        if abs(v) > limit:
+            raise ValueError(
+                f"{v:g} is too large: at most {limit:g}, so that the filter's float64 "
+                "arithmetic (squares, products and sums of variances) cannot overflow"
+            )
+    return value
 
 
 class AxisConfig(_Strict):
@@ -58,6 +89,16 @@ class SensorConfig(_Strict):
     )
     sigma_f: float = Field(50.0, ge=0.0, description="Process noise σf of the sensor state.")
 
+    @field_validator("delay_s")
+    @classmethod
+    def _finite_delay(cls, v: float | None) -> float | None:
+        return None if v is None else bounded(v)
+
+    @field_validator("sigma_f")
+    @classmethod
+    def _finite_sigma(cls, v: float) -> float:
+        return bounded(v, MAX_SIGMA)
+
 
 class TableFilterConfig(_Strict):
     """Settings shared by every map-updating filter."""
@@ -76,6 +117,11 @@ class TableFilterConfig(_Strict):
         description="Innovation gate: reject a sample whose normalised innovation e²/s "
         "exceeds gate_sigma².",
     )
+
+    @field_validator("gate_sigma")
+    @classmethod
+    def _finite_gate(cls, v: float | None) -> float | None:
+        return None if v is None else bounded(v, MAX_SIGMA)
 
     @model_validator(mode="after")
     def _locked_cells_fit(self) -> TableFilterConfig:
@@ -101,6 +147,16 @@ class _Covariance(TableFilterConfig):
         "(PSD-preserving row/column scaling).",
     )
 
+    @field_validator("sigma_w", "sigma_v")
+    @classmethod
+    def _finite_sigma(cls, v: Any) -> Any:
+        return bounded(v, MAX_SIGMA)
+
+    @field_validator("p0")
+    @classmethod
+    def _finite_p0(cls, v: Any) -> Any:
+        return bounded(v, MAX_VARIANCE)
+
 
 class KfConfig(_Covariance):
     """Full Kalman filter (SKF §4.4)."""
@@ -120,6 +176,11 @@ class SskfConfig(TableFilterConfig):
     sigma_w: CellValues = Field(1.0, description="Random-walk σw of each cell per sample.")
     sigma_v: float = Field(1.0, gt=0.0, description="Measurement noise σv.")
 
+    @field_validator("sigma_w", "sigma_v")
+    @classmethod
+    def _finite_sigma(cls, v: Any) -> Any:
+        return bounded(v, MAX_SIGMA)
+
 
 class RlsConfig(TableFilterConfig):
     """Recursive least squares with forgetting on the active cells."""
@@ -131,6 +192,16 @@ class RlsConfig(TableFilterConfig):
         1.0, gt=0.0, description="Measurement noise σv, used only by the innovation gate."
     )
 
+    @field_validator("sigma_v")
+    @classmethod
+    def _finite_sigma(cls, v: Any) -> Any:
+        return bounded(v, MAX_SIGMA)
+
+    @field_validator("p0")
+    @classmethod
+    def _finite_p0(cls, v: Any) -> Any:
+        return bounded(v, MAX_VARIANCE)
+
 
 class NlmsConfig(TableFilterConfig):
     """Normalised least mean squares on the active cells."""
@@ -140,3 +211,8 @@ class NlmsConfig(TableFilterConfig):
     sigma_v: float = Field(
         1.0, gt=0.0, description="Measurement noise σv, used only by the innovation gate."
     )
+
+    @field_validator("sigma_v")
+    @classmethod
+    def _finite_sigma(cls, v: Any) -> Any:
+        return bounded(v, MAX_SIGMA)

@@ -21,7 +21,7 @@ from estimation.filters.config import (
 from estimation.filters.functions import initial_state, run_chunk, variance
 from estimation.filters.settings import FilterSettings, grid_of, initial_table, resolve_settings
 from estimation.filters.state import FilterState, KfState, LocalState, ThetaState
-from estimation.registry import EstimatorKind, family
+from estimation.registry import Cost, EstimatorKind, family
 from estimation.signals import Signals
 from estimation.table import Table
 
@@ -156,10 +156,41 @@ class TableFilter(ChunkedEstimator[FilterState, Prepared]):
         }
 
 
+# Per sample, every filter keeps: prediction and residual (2), the aligned measurement (1),
+# status and accept codes (1), scoring temporaries (8) and the regressor rows (c indices and
+# c weights) twice, the estimator's and the worker's (4c).
+_SAMPLE_FLOATS = 12
+
+
+def _filter_samples(c: int) -> float:
+    return _SAMPLE_FLOATS + 4 * c
+
+
+KF_COST = Cost(
+    # θ and P over the cells plus the sensor state: (p+1)² + (p+1)
+    state_floats=lambda p, c: (p + 1) ** 2 + p + 1,
+    sample_floats=_filter_samples,
+    # P w (p·c), the rank-one update of P (2p²), the gain (4p)
+    ops_per_sample=lambda p, c: 2 * p * p + p * c + 4 * p,
+    max_cells=2000,  # P alone is 32 MB and a run's versions about 350 MB at this size
+)
+LOCAL_COST = Cost(
+    # θ, the variances and the lazy-aging marks (3p); the active block with the sensor
+    state_floats=lambda p, c: 3 * p + (c + 1) ** 2 + c,
+    sample_floats=_filter_samples,
+    ops_per_sample=lambda p, c: 4 * (c + 1) ** 2 + 20 * c,
+)
+GAIN_COST = Cost(
+    state_floats=lambda p, c: p,  # θ is the whole state
+    sample_floats=_filter_samples,
+    ops_per_sample=lambda p, c: 6 * c,
+)
+
 _spec = family(
     TableFilter,
     TableFilterConfig,
     kind=EstimatorKind.MAP_FILTER,
+    cost=LOCAL_COST,
     paper="Guardiola, Pla, Blanco-Rodriguez & Eriksson (2014), Control Engineering Practice "
     "— the SKF paper",
 )
@@ -173,6 +204,7 @@ KF = _spec(
     KfConfig,
     KfState,
     _UNITS,
+    cost=KF_COST,
 )
 SKF = _spec(
     "skf",
@@ -191,6 +223,7 @@ SSKF = _spec(
     SskfConfig,
     ThetaState,
     _UNITS,
+    cost=GAIN_COST,
 )
 RLS = _spec(
     "rls",
@@ -209,5 +242,6 @@ NLMS = _spec(
     NlmsConfig,
     ThetaState,
     _UNITS,
+    cost=GAIN_COST,
 )
 FILTER_SPECS = (KF, SKF, SSKF, RLS, NLMS)

@@ -50,6 +50,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
+from pydantic import BaseModel
 
 from estimation.errors import ConfigError, ShapeError, StateError
 from estimation.estimator import Chunk, ChunkedEstimator
@@ -62,7 +63,7 @@ from estimation.observers.ekf_config import (
     EkfMapConfig,
 )
 from estimation.plants.airpath_params import AirpathParams
-from estimation.registry import EstimatorKind, family
+from estimation.registry import Cost, EstimatorKind, family
 from estimation.signals import Signals
 from estimation.state import EstimatorState
 from estimation.table import Axis, Table
@@ -402,8 +403,32 @@ def output_units(name: str) -> dict[str, str]:
     return _BASE_UNITS | _EXTRA_UNITS[name]
 
 
+def _ekf_size(config: BaseModel) -> tuple[int, int]:
+    """The map's grid values (Map) as cells, two active per sample; none for Def and Aug."""
+    breakpoints = getattr(config, "breakpoints", None)
+    return (len(breakpoints), 2) if breakpoints else (0, 1)
+
+
+EKF_COST = Cost(
+    # x and P over m = 3 plant states + a bias (Aug) or the map's p values (Map): m² + m,
+    # the Seiliger memory and the counts
+    state_floats=lambda p, c: (p + 4) ** 2 + (p + 4) + 32,
+    # U and Y (4 + 4), accept and time (2), seven output series, scoring temporaries (8)
+    # and, for a map, the worker's regressor rows (2c)
+    sample_floats=lambda c: 25 + 2 * c,
+    # the covariance propagation F P Fᵀ and the update (about 4 m³), the model (~500)
+    ops_per_sample=lambda p, c: 4 * (p + 4) ** 3 + 500,
+    max_cells=200,  # m³ per sample: a 200-value map is already ~3·10⁷ operations a sample
+    size=_ekf_size,
+)
+
 _spec = family(
-    EkfObserver, EkfConfig, kind=EstimatorKind.JOINT_EKF, paper=_PAPER, produces_map=False
+    EkfObserver,
+    EkfConfig,
+    kind=EstimatorKind.JOINT_EKF,
+    paper=_PAPER,
+    produces_map=False,
+    cost=EKF_COST,
 )
 
 EKF_DEF = _spec(

@@ -51,7 +51,7 @@ from estimation.observers.lmi import (
     GainDesign,
     synthesize_gain,
 )
-from estimation.registry import EstimatorKind, EstimatorSpec
+from estimation.registry import Cost, EstimatorKind, EstimatorSpec
 from estimation.signals import Signals
 from estimation.state import EstimatorState
 from estimation.table import Axis, Grid, Table
@@ -399,6 +399,15 @@ def _factory(config: BaseModel) -> LpvObserver:
     return LpvObserver(config)
 
 
+LPV_COST = Cost(
+    # x̂ (3), θ̂, the ψ weights and the excitation per element (3p), the gain and ρ box
+    state_floats=lambda p, c: 3 * p + 64,
+    # six output series, the prepared y, ρ (5), e, h, accept (9), the regressor twice (4c)
+    # and the kernel's chunk outputs (5)
+    sample_floats=lambda c: 20 + 4 * c,
+    ops_per_sample=lambda p, c: 40 * c + 200,
+)
+
 LPV = EstimatorSpec(
     name="lpv",
     title="LPV adaptive observer (MAF error map)",
@@ -410,5 +419,6 @@ LPV = EstimatorSpec(
     factory=_factory,
     state_class=LpvState,
     output_units=OUTPUT_UNITS,
+    cost=LPV_COST,
 )
 LPV_SPECS = (LPV,)

@@ -25,7 +25,7 @@ import numpy as np
 from estimation.errors import ConfigError, ShapeError, StateError
 from estimation.estimator import ChunkedEstimator
 from estimation.kernels import torque as kt
-from estimation.registry import EstimatorKind, EstimatorSpec, family
+from estimation.registry import Cost, EstimatorKind, EstimatorSpec, family
 from estimation.signals import Signals
 from estimation.state import EstimatorState
 from estimation.torque.config import (
@@ -277,12 +277,22 @@ class TorqueEstimator(ChunkedEstimator[TorqueState, TorquePrepared]):
         return prepared.time_s
 
 
+TORQUE_COST = Cost(
+    # x (≤ 4), P (2, 2), Q (2,), R (2, 2), Θ̂ (2,): no table
+    state_floats=lambda p, c: 16,
+    # time, speed, load, air (4) and their prepared copies (4), four output series, status
+    # and scoring temporaries (8)
+    sample_floats=lambda c: 20,
+    ops_per_sample=lambda p, c: 100,
+)
+
 _spec = family(
     TorqueEstimator,
     TorqueEstimatorConfig,
     kind=EstimatorKind.TORQUE,
     paper=TQ_PAPER,
     produces_map=False,
+    cost=TORQUE_COST,
 )
 
 

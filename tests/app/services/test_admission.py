@@ -1,0 +1,188 @@
+"""Admission control and the semantic config checks of run planning, and the wall-clock
+budget a worker enforces."""
+
+from __future__ import annotations
+
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import pytest
+from fastapi.testclient import TestClient
+
+from app.api.app import create_app
+from app.domain import Channel, Dataset
+from app.errors import InvalidRequestError
+from app.services.admission import (
+    WORKER_BASE_BYTES,
+    Limits,
+    OverBudgetError,
+    admit_run,
+    human_bytes,
+)
+from app.services.run_plan import RunRequest, locked_cells, plan_run
+from estimation.registry import get_spec, names
+from tests.support.helpers import log_csv, service_settings, start_run, upload_ok, wait_run
+from tests.support.server import run_body
+
+LIMITS = Limits(
+    run_memory_bytes=2 * 2**30, max_cells=250_000, versions_bytes=512 * 2**20, run_max_s=6 * 3600
+)
+
+
+def _dataset(rows: int = 3000, rate_hz: float = 50.0) -> Dataset:
+    channels = [Channel("u1", "rpm"), Channel("u2", "mg/stroke"), Channel("y", "ppm")]
+    return Dataset(
+        id=1, name="log", source="csv", rows=rows, rate_hz=rate_hz,
+        duration_s=(rows - 1) / rate_hz, time_column="time", channels=channels,
+        scenario=None, seed=None, has_truth=False, created_at=datetime.now(UTC),
+    )  # fmt: skip
+
+
+def _request(n1: int = 4, n2: int = 4, estimator: str = "skf", **config: Any) -> RunRequest:
+    axes = [
+        {"name": "u1", "breakpoints": [float(i) for i in range(n1)]},
+        {"name": "u2", "breakpoints": [float(i) for i in range(n2)]},
+    ]
+    return RunRequest(
+        dataset_id=1, estimator=estimator, signals={"y": "y"}, table={"axes": axes}, config=config
+    )
+
+
+def _plan(request: RunRequest, dataset: Dataset | None = None) -> Any:
+    return plan_run(request, dataset or _dataset(), None, version_fraction=0.1, limits=LIMITS)
+
+
+def _admit(name: str, cells: int, samples: int = 10_000, **kw: Any) -> Any:
+    args = {
+        "corners": 4,
+        "channels": 4,
+        "version_every": samples,
+        "log_duration_s": 100.0,
+        "pace": None,
+    }
+    return admit_run(get_spec(name), cells=cells, samples=samples, limits=LIMITS, **(args | kw))
+
+
+def test_human_bytes() -> None:
+    assert human_bytes(80) == "80 B"
+    assert human_bytes(3 * 2**20) == "3.0 MiB"
+    assert human_bytes(7.28 * 2**40) == "7.3 TiB"
+
+
+def test_a_small_run_is_admitted_with_its_prediction() -> None:
+    plan = _plan(_request())
+    assert plan.prediction is not None
+    assert WORKER_BASE_BYTES < plan.prediction.memory_bytes < WORKER_BASE_BYTES + 10 * 2**20
+    assert plan.prediction.versions_bytes > 0
+
+
+@pytest.mark.parametrize("name", ["skf", "sskf", "rls", "nlms", "lpv"])
+def test_the_global_cell_cap_names_the_table(name: str) -> None:
+    with pytest.raises(OverBudgetError, match=r"250,001 cells > 250,000") as caught:
+        _admit(name, 250_001)
+    assert caught.value.field == "table.axes"
+    assert caught.value.code == "over_budget"
+
+
+def test_the_kf_has_its_own_cap_and_a_quadratic_memory() -> None:
+    with pytest.raises(OverBudgetError, match="kf's cap") as caught:
+        _plan(_request(60, 60, "kf"))
+    assert caught.value.field == "table.axes"
+    tight = Limits(
+        run_memory_bytes=300 * 2**20, max_cells=10**6, versions_bytes=2**40, run_max_s=1e9
+    )
+    with pytest.raises(OverBudgetError, match=r"predicted .* MiB > 300\.0 MiB run budget"):
+        admit_run(
+            get_spec("kf"), cells=1600, corners=4, samples=1000, channels=3, version_every=1000,
+            log_duration_s=20.0, pace=None, limits=tight,
+        )  # fmt: skip
+
+
+def test_a_huge_log_is_refused_by_memory_naming_the_dataset() -> None:
+    with pytest.raises(OverBudgetError, match="run budget") as caught:
+        _admit("nlms", 16, samples=200_000_000, channels=20)
+    assert caught.value.field == "dataset_id"
+
+
+def test_versions_over_budget_suggest_a_cadence() -> None:
+    # 100 000 cells of skf: ~7 MiB per version; 100 versions do not fit in 512 MiB
+    with pytest.raises(OverBudgetError, match=r"version every .* samples or more fits") as caught:
+        _admit("skf", 100_000, samples=10_000, version_every=100)
+    assert caught.value.field == "config.version_every"
+    assert _admit("skf", 100_000, samples=10_000, version_every=1000).versions_bytes < 2**29
+
+
+def test_pace_must_fit_the_wall_clock_budget() -> None:
+    with pytest.raises(OverBudgetError, match=r"pace >= 0\.\d+ fits") as caught:
+        _admit("skf", 16, log_duration_s=3600.0, pace=0.1)  # 10 h > 6 h
+    assert caught.value.field == "config.pace"
+    assert _admit("skf", 16, log_duration_s=3600.0, pace=0.5).duration_s == pytest.approx(7200)
+
+
+@pytest.mark.parametrize("pace", [1e-6, 0.009, 0, -1])
+def test_pace_has_a_floor(pace: float) -> None:
+    with pytest.raises(InvalidRequestError, match=r">= 0\.01") as caught:
+        _plan(_request(pace=pace))
+    assert caught.value.field == "config.pace"
+
+
+def test_every_estimator_is_capped() -> None:
+    for name in names():
+        with pytest.raises(OverBudgetError):
+            _admit(name, 10**7)
+
+
+@pytest.mark.parametrize(
+    ("config", "field"),
+    [
+        ({"p0": 1e308}, "config.p0"),
+        ({"sigma_w": 1e200}, "config.sigma_w"),
+        ({"sensor": {"delay_s": 1e9}}, "config.sensor.delay_s"),
+        ({"sensor": {"delay_samples": 3000}}, "config.sensor.delay_samples"),
+    ],
+)
+def test_semantic_config_checks_name_the_field(config: dict[str, Any], field: str) -> None:
+    with pytest.raises(InvalidRequestError) as caught:
+        _plan(_request(**config))
+    assert caught.value.field == field
+
+
+def test_a_delay_shorter_than_the_log_is_fine() -> None:
+    _plan(_request(sensor={"delay_s": 0.5}))
+
+
+@pytest.mark.parametrize(
+    "raw",
+    [
+        [[True, False], [False, True]],  # 2×2 mask on a 4×4 table (was read as index lists)
+        [[True] * 4] * 3,
+        [[True, False, False, False]] * 3 + [[True, False]],  # ragged
+        [[0, 9]],  # index list outside the table
+        [[1, 2, 3]],  # three indices on a 2-axis table
+    ],
+)
+def test_wrong_lock_masks_are_refused(raw: Any) -> None:
+    with pytest.raises(InvalidRequestError) as caught:
+        locked_cells(raw, (4, 4))
+    assert caught.value.field.startswith("config.locked")
+
+
+def test_right_lock_masks_are_read() -> None:
+    mask = [[False] * 4 for _ in range(4)]
+    mask[1][2] = True
+    assert locked_cells(mask, (4, 4)) == [[1, 2]]
+    assert locked_cells([[1, 2]], (4, 4)) == [[1, 2]]
+    assert locked_cells([6], (4, 4)) == [[1, 2]]
+
+
+def test_a_run_over_its_wall_clock_budget_fails_with_a_clear_error(tmp_path: Path) -> None:
+    """Admitted (its computation is predicted to take far less), then failed by the worker
+    once the attempt's clock passes MAPWISE_RUN_MAX_S; what it learnt is kept as a version."""
+    settings = service_settings(f"sqlite:///{tmp_path / 'db.sqlite'}", run_max_s=1e-3)
+    with TestClient(create_app(settings)) as client:
+        dataset = upload_ok(client, log_csv(3000))
+        run = start_run(client, run_body(dataset["id"], "skf"))
+        done = wait_run(client, run["id"])
+    assert done["status"] == "failed"
+    assert "wall-clock budget of 0.001 s (MAPWISE_RUN_MAX_S)" in done["error"]
