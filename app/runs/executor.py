@@ -1,5 +1,7 @@
-"""The run executor: a process pool (spawn) fed with run ids, and the pump that carries
-worker messages to the live hub on the event loop.
+"""The run executor: isolated worker processes (:class:`app.runs.pool.WorkerPool`) fed with
+run ids, and the pump that carries worker messages to the live hub on the event loop. A
+worker that dies loses only the attempt of the run it executed (by the lost-run policy); it
+is replaced, and every other run carries on.
 
 Each executor has an owner id (host, pid and process start time) that its workers write into
 the runs they claim. At start-up it sweeps the database: runs whose owner was a server
@@ -22,9 +24,6 @@ import os
 import queue as queue_module
 import socket
 import threading
-from concurrent.futures import Future, ProcessPoolExecutor
-from concurrent.futures.process import BrokenProcessPool
-from functools import partial
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -35,7 +34,7 @@ from app.domain import RunStatus
 from app.runs.frames import StatusFrame
 from app.runs.hub import LiveHub
 from app.runs.lost_runs import ExecutorBase
-from app.runs.pool import execute_in_pool, init_pool_worker, warm_up
+from app.runs.pool import Outcome, WorkerPool
 
 log = logging.getLogger("mapwise.runs")
 SHUTDOWN_WAIT_S = 15.0
@@ -71,21 +70,30 @@ def dead_local_owner(owner: str) -> bool:
 
 class RunExecutor(ExecutorBase):
     def __init__(self, settings: Settings, db: Database, hub: LiveHub) -> None:
-        super().__init__(settings, db, hub, owner=local_owner(), parent_pid=os.getpid())
+        super().__init__(
+            settings,
+            db,
+            hub,
+            owner=local_owner(),
+            parent_pid=os.getpid(),
+            run_memory_mb=settings.run_memory_mb,
+        )
         self._mp = multiprocessing.get_context("spawn")
         self._queue: Any = None
-        self._pool: ProcessPoolExecutor | None = None
+        self._pool: WorkerPool | None = None
         self._pump: threading.Thread | None = None
-        self._lock = threading.Lock()
-        self._futures: dict[int, Future[str]] = {}
+        self._closing = threading.Event()
 
     # -- lifecycle ----------------------------------------------------------------------------
 
     def start(self, loop: asyncio.AbstractEventLoop) -> None:
-        """Start the pool (from the long-lived event-loop thread) and the message pump."""
+        """Start the workers (from the long-lived event-loop thread) and the message pump."""
         self._loop = loop
         self._queue = self._mp.Queue(maxsize=10_000)
-        self._pool = self._new_pool()
+        self._pool = WorkerPool(
+            self.settings.run_workers, self.context, self._queue, self._outcome, self._mp
+        )
+        self._pool.start()
         self._pump = threading.Thread(target=self._pump_messages, name="mapwise-pump", daemon=True)
         self._pump.start()
         with self.db.read() as s:
@@ -101,38 +109,21 @@ class RunExecutor(ExecutorBase):
             self.submit(run_id)
         self._start_sweeper()
 
-    def _new_pool(self) -> ProcessPoolExecutor:
-        pool = ProcessPoolExecutor(
-            max_workers=self.settings.run_workers,
-            mp_context=self._mp,
-            initializer=init_pool_worker,
-            initargs=(self.context, self._queue),
-        )
-        for _ in range(self.settings.run_workers):
-            pool.submit(warm_up)  # launches every worker now, from this thread
-        return pool
-
     def shutdown(self) -> None:
-        """Ask running runs to stop, wait for the pool, then stop the pump."""
-        with self._lock:
-            active = [run_id for run_id, f in self._futures.items() if not f.done()]
-        if active:
-            with self.db.write() as s:
-                runs = RunRepo(s)
-                for run_id in active:
-                    runs.request_stop(run_id, "shutdown")
+        """Ask running runs to stop, wait for the workers, then stop the pump."""
         pool = self._pool
-        self._pool = None
+        self._closing.set()
         if pool is not None:
-            done = threading.Event()
-
-            def _wait() -> None:
-                pool.shutdown(wait=True, cancel_futures=True)
-                done.set()
-
-            threading.Thread(target=_wait, daemon=True).start()
-            if not done.wait(SHUTDOWN_WAIT_S):
-                log.warning("run workers did not stop within %s s", SHUTDOWN_WAIT_S)
+            pool.close()
+            active = list(pool.executing())
+            if active:
+                with self.db.write() as s:
+                    runs = RunRepo(s)
+                    for run_id in active:
+                        runs.request_stop(run_id, "shutdown")
+            if not pool.shutdown(SHUTDOWN_WAIT_S):
+                log.warning("run workers did not stop within %s s: killed", SHUTDOWN_WAIT_S)
+        self._pool = None
         self._stopping.set()
         with self.db.write() as s:
             runs = RunRepo(s)
@@ -147,60 +138,57 @@ class RunExecutor(ExecutorBase):
     # -- runs -----------------------------------------------------------------------------------
 
     def submit(self, run_id: int) -> None:
-        with self._lock:
-            if self._pool is None:
-                raise RuntimeError("the run executor is not running")
-            try:
-                future = self._pool.submit(execute_in_pool, run_id)
-            except BrokenProcessPool:
-                log.error("the run pool broke; starting a new one")
-                self._pool = self._new_pool()
-                future = self._pool.submit(execute_in_pool, run_id)
-            self._futures[run_id] = future
-        future.add_done_callback(partial(self._done, run_id))
+        pool = self._pool
+        if pool is None:
+            raise RuntimeError("the run executor is not running")
+        if self._closing.is_set():
+            return  # it stays queued in the database: the next start-up submits it
+        pool.submit(run_id)
 
-    def _done(self, run_id: int, future: Future[str]) -> None:
-        with self._lock:
-            if self._futures.get(run_id) is future:
-                del self._futures[run_id]
-        if future.cancelled():
+    def _outcome(self, run_id: int, outcome: Outcome) -> None:
+        """A run's turn in a worker ended (called from that worker's thread)."""
+        if outcome.error is not None:
+            self._fail(run_id, f"the worker process failed: {outcome.error}")
+        elif outcome.died is not None and not self._closing.is_set():
+            self._died(run_id, outcome)
+
+    def _fail(self, run_id: int, message: str) -> None:
+        log.error("run %s: %s", run_id, message)
+        try:
+            with self.db.write() as s:
+                changed = RunRepo(s).set_status(
+                    run_id,
+                    RunStatus.FAILED,
+                    only_if=(RunStatus.RUNNING,),
+                    error=message,
+                    finished=True,
+                )
+        except Exception:  # the database may be gone at shutdown
+            log.exception("run %s: could not record its failure", run_id)
             return
-        exc = future.exception()
-        if exc is None:
+        if changed:
+            self._deliver(StatusFrame(run_id, RunStatus.FAILED, message).to_message())
+
+    def _died(self, run_id: int, outcome: Outcome) -> None:
+        """The worker executing ``run_id`` died: the run is at fault (a kill, the kernel's OOM
+        killer, a crash), so its attempt is lost (interrupted, re-queued or, poisoned,
+        failed by policy). The other workers and their runs are untouched. A run the worker
+        died before claiming is simply submitted again."""
+        reason = f"the run's worker process died ({outcome.died})"
+        log.error("run %s: %s", run_id, reason)
+        if outcome.attempt is not None:
+            self.lose(run_id, outcome.attempt, reason)
             return
-        log.error("run %s: its worker failed: %r", run_id, exc)
-        if not isinstance(exc, BrokenProcessPool):
-            message = f"the worker process failed: {type(exc).__name__}: {exc}"
-            try:
-                with self.db.write() as s:
-                    changed = RunRepo(s).set_status(
-                        run_id,
-                        RunStatus.FAILED,
-                        only_if=(RunStatus.RUNNING,),
-                        error=message,
-                        finished=True,
-                    )
-            except Exception:  # the database may be gone at shutdown
-                return
-            if changed:
-                self._deliver(StatusFrame(run_id, RunStatus.FAILED, message).to_message())
-            return
-        # A dead worker process (killed, out of memory) takes the whole pool with it: its
-        # runs lost their attempt; a run the dead pool never started is simply queued again.
-        if not self._stopping.is_set():
-            with self._lock:
-                if self._pool is not None and self._pool._broken:  # type: ignore[attr-defined]
-                    self._pool = self._new_pool()
         try:
             with self.db.read() as s:
-                never_started = RunRepo(s).get(run_id).status == RunStatus.QUEUED
+                run = RunRepo(s).get(run_id)
         except Exception:
+            log.exception("run %s: could not read it after its worker died", run_id)
             return
-        if never_started:
-            if not self._stopping.is_set():
-                self.submit(run_id)
-            return
-        self.lose(run_id, None, "a run worker process died (killed or out of memory)")
+        if run.status == RunStatus.QUEUED:
+            self.submit(run_id)
+        elif run.status == RunStatus.RUNNING and run.owner == self.owner:
+            self.lose(run_id, None, reason)  # claimed, but the news died with the worker
 
     # -- messages -------------------------------------------------------------------------------
 

@@ -41,6 +41,7 @@ class ExecutorBase:
             version_fraction=settings.version_fraction,
             owner=owner,
             heartbeat_s=settings.heartbeat_s,
+            run_max_s=settings.run_max_s,
             **context,
         )
         self._loop: asyncio.AbstractEventLoop | None = None

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -25,6 +26,7 @@ from app.errors import SupersededError
 from app.io.payload import unpack_signals, unpack_truth
 from app.runs.attempt import Attempt, database
 from app.runs.gates import apply_gates, parse_gates
+from app.runs.limits import out_of_memory_message
 from app.runs.live import LiveTicks, Publish
 from app.runs.options import run_options
 from app.runs.results import RunResults
@@ -49,6 +51,8 @@ class WorkerContext:
     owner: str = "local"  # the executor whose attempt this is (runs.owner)
     heartbeat_s: float = 2.0  # an executing attempt proves it lives this often
     take_over: bool = False  # claim a run left running by a dead attempt (a Dask retry)
+    run_max_s: float | None = None  # wall-clock budget of an attempt (MAPWISE_RUN_MAX_S)
+    run_memory_mb: float | None = None  # the memory limit a run executes under (its message)
 
 
 class StopRun(Exception):  # noqa: N818 - control flow, not an error
@@ -58,17 +62,31 @@ class StopRun(Exception):  # noqa: N818 - control flow, not an error
         self.error = error
 
 
-def execute_run(run_id: int, context: WorkerContext, publish: Publish | None = None) -> str:
-    """Execute one queued run to a final status; returns that status (or ``"skipped"``)."""
-    return RunSession(run_id, context, publish or (lambda _m: None)).execute()
+def execute_run(
+    run_id: int,
+    context: WorkerContext,
+    publish: Publish | None = None,
+    on_claim: Callable[[int], None] | None = None,
+) -> str:
+    """Execute one queued run to a final status; returns that status (or ``"skipped"``).
+    ``on_claim(attempt)`` is told the attempt's number as soon as it is claimed."""
+    session = RunSession(run_id, context, publish or (lambda _m: None), on_claim)
+    return session.execute()
 
 
 class RunSession:
     """One execution of a run: claim an attempt, prepare, loop over the estimator's chunks,
     complete or stop. Results, live messages and writes are delegated (module docstring)."""
 
-    def __init__(self, run_id: int, context: WorkerContext, publish: Publish) -> None:
+    def __init__(
+        self,
+        run_id: int,
+        context: WorkerContext,
+        publish: Publish,
+        on_claim: Callable[[int], None] | None = None,
+    ) -> None:
         self.run_id = run_id
+        self.on_claim = on_claim
         self.ctx = context
         self.db = database(context.database_url)
         self.live = LiveTicks(run_id, context.live_fps, publish)
@@ -76,6 +94,7 @@ class RunSession:
         self.version_sample = 0  # first sample not yet in a persisted version
         self.last_progress = 0.0  # monotonic time of the last progress write
         self.last_stop_check = 0.0
+        self.started = time.monotonic()
 
     # -- lifecycle ----------------------------------------------------------------------------
 
@@ -86,6 +105,8 @@ class RunSession:
         if attempt is None:
             return "skipped"  # finished, cancelled or taken by another attempt meanwhile
         self.attempt = attempt
+        if self.on_claim is not None:
+            self.on_claim(attempt.number)
         heartbeat = attempt.heartbeat(self.ctx.heartbeat_s)
         heartbeat.start()
         try:
@@ -106,12 +127,16 @@ class RunSession:
             return stop.status
         except SupersededError:
             raise
+        except MemoryError:  # finished below, once the traceback (and what it holds) is freed
+            pass
         except Exception as exc:  # any failure is the run's, stored with it
             message = " ".join(f"{type(exc).__name__}: {exc}".split())
             if hasattr(exc, "message"):
                 message = " ".join(str(exc).split())
             self._finish(RunStatus.FAILED, message)
             return RunStatus.FAILED
+        self._finish(RunStatus.FAILED, out_of_memory_message(self.ctx.run_memory_mb))
+        return RunStatus.FAILED
 
     def _finish(self, status: RunStatus, error: str | None) -> None:
         self.attempt.finish(status, error)
@@ -209,6 +234,15 @@ class RunSession:
                 rejected=self.results.run_rejected(),
             )
             self.last_progress = now  # also after a failure: the next try is a second on
+        budget = self.ctx.run_max_s
+        if budget is not None and now - self.started > budget:
+            if snap.sample > self.version_sample:
+                self._persist(snap)  # what it learnt is kept; a resume continues from it
+            raise StopRun(
+                RunStatus.FAILED,
+                f"the run exceeded its wall-clock budget of {budget:g} s (MAPWISE_RUN_MAX_S) "
+                f"at sample {snap.sample} of {self.results.n}",
+            )
         if now - self.last_stop_check < self.ctx.cancel_poll_s:
             return
         self.last_stop_check = now

@@ -220,9 +220,10 @@ def test_empty_database_gets_schema_and_demo(backend: str, fresh_url) -> None:  
         srv.stop()
 
 
-def test_a_killed_worker_interrupts_its_runs_and_the_pool_recovers(server: Server) -> None:
+def test_a_killed_worker_interrupts_only_its_run_and_is_replaced(server: Server) -> None:
     import os
     import signal
+    from pathlib import Path
 
     dataset = _upload(server, log_csv(3000, seed=33, rate_hz=100.0))  # 30 s of log
     running = [_start(server, run_body(dataset, pace=3)) for _ in range(2)]  # both workers
@@ -231,16 +232,26 @@ def test_a_killed_worker_interrupts_its_runs_and_the_pool_recovers(server: Serve
     queued = _start(server, run_body(dataset))
     workers = server.workers()
     assert len(workers) == 2
-    os.kill(workers[0], signal.SIGKILL)  # as the OOM killer would
-    for run_id in running:
-        run = server.wait_run(run_id, ("interrupted", "failed", "succeeded"), timeout=60)
-        assert run["status"] == "interrupted"
-        assert "worker process died" in run["error"]
+    victim = workers[0]
+    os.kill(victim, signal.SIGSTOP)  # so it cannot move on before it is named and killed
+    name = Path(f"/proc/{victim}/comm").read_text().strip()
+    os.kill(victim, signal.SIGKILL)  # as the OOM killer would
+    killed = int(name.removeprefix("mw-run-"))
+    (other,) = [r for r in running if r != killed]
+    run = server.wait_run(killed, ("interrupted", "failed", "succeeded"), timeout=60)
+    assert run["status"] == "interrupted"
+    assert "worker process died (killed by SIGKILL)" in run["error"]
+    done = server.wait_run(other, ("interrupted", "failed", "succeeded"), timeout=60)
+    assert done["status"] == "succeeded", done  # the other worker's run never noticed
+    assert (done["attempt"], done["lost_attempts"]) == (1, 0)
     assert server.wait_run(queued, ("succeeded", "failed"))["status"] == "succeeded"
+    workers = server.workers()
+    assert len(workers) == 2
+    assert victim not in workers  # replaced by a new worker
     expected = server.get(f"/api/runs/{queued}/export", params={"format": "json"})
-    assert server.post(f"/api/runs/{running[0]}/resume").status_code == 200
-    assert server.wait_run(running[0], ("succeeded", "failed"))["status"] == "succeeded"
-    got = server.get(f"/api/runs/{running[0]}/export", params={"format": "json"})
+    assert server.post(f"/api/runs/{killed}/resume").status_code == 200
+    assert server.wait_run(killed, ("succeeded", "failed"))["status"] == "succeeded"
+    got = server.get(f"/api/runs/{killed}/export", params={"format": "json"})
     assert got["values"] == expected["values"]
 
 
