@@ -182,6 +182,10 @@ class BaseMap:
     created_at: datetime
 
 
+SCOPES = ("read", "run", "admin")  # what a token may do; see docs/security.md
+DEFAULT_SCOPES = ("read", "run")  # a new token's scopes unless the admin names them
+
+
 @dataclass(frozen=True, slots=True)
 class ApiToken:
     id: int
@@ -190,6 +194,7 @@ class ApiToken:
     created_at: datetime
     last_used_at: datetime | None
     revoked_at: datetime | None
+    scopes: tuple[str, ...] = SCOPES
 
 
 @dataclass(frozen=True, slots=True)

@@ -1,4 +1,11 @@
-"""Dependencies: the services of the running app, and bearer-token authentication."""
+"""Dependencies: the services of the running app, bearer-token authentication and scopes.
+
+Every ``/api`` route needs a scope (docs/security.md): reading needs ``read``; what starts
+work (uploads, runs, sweeps, cancel, resume, labels) needs ``run``; what destroys data or
+changes shared starting points (deletes, base maps) needs ``admin``. The table is
+:data:`ROUTE_SCOPES`; a writing route missing from it needs ``admin`` (fail closed). With auth
+off (loopback, no ``MAPWISE_REQUIRE_AUTH``) the caller has every scope.
+"""
 
 from __future__ import annotations
 
@@ -11,7 +18,8 @@ from starlette.requests import HTTPConnection
 from app.api.loop_lag import LoopLag
 from app.config import Settings
 from app.db.engine import Database
-from app.errors import UnauthorizedError
+from app.domain import SCOPES
+from app.errors import InsufficientScopeError, UnauthorizedError
 from app.runs.executor import Executor
 from app.runs.hub import LiveHub
 from app.services.base_maps import BaseMapService
@@ -53,14 +61,60 @@ def get_settings(connection: HTTPConnection) -> Settings:
 SettingsDep = Annotated[Settings, Depends(get_settings)]
 
 
-def check_token(services: Services, secret: str | None) -> None:
-    """Raise 401 unless auth is off or ``secret`` is an active token."""
+ROUTE_SCOPES: dict[str, str] = {
+    "POST /datasets": "run",
+    "POST /datasets/simulate": "run",
+    "DELETE /datasets/{dataset_id}": "admin",
+    "POST /runs": "run",
+    "POST /runs/{run_id}/cancel": "run",
+    "POST /runs/{run_id}/resume": "run",
+    "PATCH /runs/{run_id}/versions/{version_id}": "run",
+    "POST /base-maps": "admin",
+    "POST /sweeps": "run",
+    "POST /batches": "run",
+}
+READ_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
+
+
+@dataclass(frozen=True, slots=True)
+class Caller:
+    """Who is asking: their token (``None`` with auth off) and what they may do."""
+
+    token_id: int | None
+    scopes: tuple[str, ...]
+    auth_required: bool
+
+
+def route_scope(method: str, path: str) -> str:
+    """The scope ``method`` on the route template ``path`` (with or without ``/api``) needs."""
+    path = path.removeprefix("/api")
+    scope = ROUTE_SCOPES.get(f"{method.upper()} {path}")
+    if scope is not None:
+        return scope
+    return "read" if method.upper() in READ_METHODS else "admin"
+
+
+def authenticate(services: Services, secret: str | None) -> Caller:
+    """The caller behind ``secret``; 401 unless auth is off or it is an active token."""
     if not services.settings.auth_required:
-        return
+        return Caller(token_id=None, scopes=SCOPES, auth_required=False)
     if not secret:
         raise UnauthorizedError("this server requires a bearer token (mapwise token create)")
-    if services.tokens.verify(secret) is None:
+    token = services.tokens.verify(secret)
+    if token is None:
         raise UnauthorizedError("the bearer token is unknown or revoked")
+    return Caller(token_id=token.id, scopes=token.scopes, auth_required=True)
+
+
+def require_scope(caller: Caller, scope: str, what: str) -> None:
+    """403 ``insufficient_scope`` unless ``caller`` has ``scope``."""
+    if scope not in caller.scopes:
+        raise InsufficientScopeError(
+            f"this token lacks the {scope!r} scope that {what} needs "
+            f"(it has {', '.join(caller.scopes) or 'none'}); "
+            f"create one with `mapwise token create --scope {scope}`",
+            scope=scope,
+        )
 
 
 def _bearer(header: str | None) -> str | None:
@@ -70,5 +124,15 @@ def _bearer(header: str | None) -> str | None:
     return value.strip() if scheme.lower() == "bearer" and value.strip() else None
 
 
-def require_token(request: Request) -> None:
-    check_token(get_services(request), _bearer(request.headers.get("authorization")))
+def require_token(request: Request) -> Caller:
+    """The dependency of every ``/api`` route: a valid token with the route's scope."""
+    caller = authenticate(get_services(request), _bearer(request.headers.get("authorization")))
+    route = request.scope.get("route")
+    template = getattr(route, "path", None) or request.url.path
+    scope = route_scope(request.method, template)
+    require_scope(caller, scope, f"{request.method} {request.url.path}")
+    request.state.caller = caller
+    return caller
+
+
+CallerDep = Annotated[Caller, Depends(require_token)]

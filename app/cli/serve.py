@@ -13,6 +13,7 @@ from pydantic import ValidationError
 
 from app.cli.errors import UsageError
 from app.config import Settings
+from app.domain import DEFAULT_SCOPES, SCOPES
 
 
 def _database_arg(parser: argparse.ArgumentParser) -> None:
@@ -59,8 +60,21 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
 
     token = sub.add_parser("token", help="API bearer tokens: create, list, revoke")
     token_sub = token.add_subparsers(dest="token_command", required=True)
-    create = token_sub.add_parser("create", help="create a token (its secret is shown once)")
+    create = token_sub.add_parser(
+        "create",
+        help="create a token (its secret is shown once)",
+        description="Create a bearer token. Scopes: read (see every dataset, run and map), "
+        "run (upload, start, cancel, resume, label), admin (delete, base maps). Without "
+        "--scope a token gets read and run; ask for admin explicitly.",
+    )
     create.add_argument("--name", required=True, help="what the token is for")
+    create.add_argument(
+        "--scope",
+        action="append",
+        choices=list(SCOPES),
+        dest="scopes",
+        help="a scope of the token; repeat for several (default: read and run)",
+    )
     _database_arg(create)
     create.set_defaults(handler=_cmd_token_create)
     listing = token_sub.add_parser("list", help="list tokens (never their secrets)")
@@ -130,6 +144,13 @@ def _cmd_serve(args: argparse.Namespace) -> int:
             )
     except SQLAlchemyError as exc:
         raise _db_error(exc, settings.database_url) from None
+    if settings.allowed_hosts is None and settings.host in ("0.0.0.0", "::"):
+        print(
+            "mapwise: note: only requests to "
+            f"{', '.join(settings.trusted_hosts)} are answered (DNS-rebinding protection); "
+            "set MAPWISE_ALLOWED_HOSTS to the names clients use to reach this server",
+            file=sys.stderr,
+        )
     shown = "localhost" if settings.host in ("127.0.0.1", "::1") else settings.host
     print(f"mapwise: dashboard at http://{shown}:{settings.port}/", file=sys.stderr)
     uvicorn.run(
@@ -203,12 +224,13 @@ def _tokens(args: argparse.Namespace) -> Any:
 
 
 def _cmd_token_create(args: argparse.Namespace) -> int:
-    token, secret = _tokens(args).create(args.name)
+    token, secret = _tokens(args).create(args.name, tuple(args.scopes or DEFAULT_SCOPES))
     print(secret)
     import sys
 
     print(
-        f"token {token.id} ({token.name}) created; the secret above is shown only once",
+        f"token {token.id} ({token.name}, scopes {','.join(token.scopes)}) created; "
+        "the secret above is shown only once",
         file=sys.stderr,
     )
     return 0
@@ -218,7 +240,8 @@ def _cmd_token_list(args: argparse.Namespace) -> int:
     for t in _tokens(args).list():
         state = "revoked" if t.revoked_at else "active"
         used = t.last_used_at.isoformat(timespec="seconds") if t.last_used_at else "never"
-        print(f"{t.id:>4}  {t.prefix}…  {state:<8} last used {used:<25} {t.name}")
+        scopes = ",".join(t.scopes)
+        print(f"{t.id:>4}  {t.prefix}…  {state:<8} {scopes:<14} last used {used:<25} {t.name}")
     return 0
 
 

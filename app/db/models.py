@@ -1,7 +1,9 @@
 """SQLAlchemy 2 models: the schema Alembic migrations must produce exactly.
 
 Arrays live in ``LargeBinary`` columns as ``.npz`` (:mod:`app.db.blobs`); payload columns
-are deferred so lists never load them. Only :mod:`app.db.repositories` touches these classes.
+are deferred so lists never load them. Every SQLite table is ``AUTOINCREMENT``: an id is never
+reused after a delete, so an old link never shows other data (PostgreSQL sequences never
+reuse either). Only :mod:`app.db.repositories` touches these classes.
 """
 
 from __future__ import annotations
@@ -48,6 +50,7 @@ class DatasetRow(Base):
     """A log or simulation: channel list, time base and the samples as an npz payload."""
 
     __tablename__ = "datasets"
+    __table_args__ = ({"sqlite_autoincrement": True},)
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     name: Mapped[str] = mapped_column(String(200))
@@ -68,7 +71,10 @@ class RunRow(Base):
     """One estimator session over a dataset; ``stop_request`` is how a worker is told to stop."""
 
     __tablename__ = "runs"
-    __table_args__ = (Index("ix_runs_dataset_status", "dataset_id", "status"),)
+    __table_args__ = (
+        Index("ix_runs_dataset_status", "dataset_id", "status"),
+        {"sqlite_autoincrement": True},
+    )
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     dataset_id: Mapped[int] = mapped_column(ForeignKey("datasets.id", ondelete="CASCADE"))
@@ -107,6 +113,7 @@ class RunGroupRow(Base):
     fleet batch (``kind="batch"``: many datasets, one config); ``request`` is what was asked."""
 
     __tablename__ = "run_groups"
+    __table_args__ = ({"sqlite_autoincrement": True},)
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     kind: Mapped[str] = mapped_column(String(16))
@@ -123,7 +130,10 @@ class MapVersionRow(Base):
     estimator state it resumes from, and the output series since the previous version."""
 
     __tablename__ = "map_versions"
-    __table_args__ = (UniqueConstraint("run_id", "step", name="uq_map_versions_run_step"),)
+    __table_args__ = (
+        UniqueConstraint("run_id", "step", name="uq_map_versions_run_step"),
+        {"sqlite_autoincrement": True},
+    )
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     run_id: Mapped[int] = mapped_column(ForeignKey("runs.id", ondelete="CASCADE"), index=True)
@@ -146,7 +156,10 @@ class RunMetricRow(Base):
     """A final metric of a run (``value``) or a downsampled result series (``series``)."""
 
     __tablename__ = "run_metrics"
-    __table_args__ = (UniqueConstraint("run_id", "name", name="uq_run_metrics_run_name"),)
+    __table_args__ = (
+        UniqueConstraint("run_id", "name", name="uq_run_metrics_run_name"),
+        {"sqlite_autoincrement": True},
+    )
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     run_id: Mapped[int] = mapped_column(ForeignKey("runs.id", ondelete="CASCADE"), index=True)
@@ -160,6 +173,7 @@ class BaseMapRow(Base):
     """A named starting map, promoted from a run version or imported, with its lineage."""
 
     __tablename__ = "base_maps"
+    __table_args__ = ({"sqlite_autoincrement": True},)
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     name: Mapped[str] = mapped_column(String(200))
@@ -183,6 +197,7 @@ class ApiTokenRow(Base):
     """A bearer token, stored only as its SHA-256 hash."""
 
     __tablename__ = "api_tokens"
+    __table_args__ = ({"sqlite_autoincrement": True},)
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     name: Mapped[str] = mapped_column(String(200))
@@ -191,3 +206,4 @@ class ApiTokenRow(Base):
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
     last_used_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
     revoked_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
+    scopes: Mapped[str] = mapped_column(String(64))  # comma-separated: read,run,admin

@@ -6,6 +6,12 @@ small bounded queue; when it is full the viewer's pending deltas are dropped and
 for a fresh ``full`` frame, which it gets as soon as it reads again. The hub keeps the current
 state of every executing run (map, variances, visits, trajectory and series so far, bounded
 by halving their resolution) so late joiners start from a full frame.
+
+Viewers are admitted within limits (per run, per client address, in all): past one,
+:meth:`LiveHub.subscribe` raises :class:`ViewerLimitError` saying which. A viewer's memory is
+its queue of at most ``VIEWER_QUEUE`` messages, each encoded once and shared by every viewer
+of the run. The hub knows which token each viewer came with, so a revoked token's viewers
+can be closed (:meth:`LiveHub.close_tokens`).
 """
 
 from __future__ import annotations
@@ -59,18 +65,48 @@ class LiveState:
                 mine["values"] = mine["values"][::2]
 
 
-class Viewer:
-    """One WebSocket viewer: a bounded queue and a flag asking for a full frame."""
+@dataclass(frozen=True, slots=True)
+class EncodedFull:
+    """A run's full frame encoded once for every viewer joining at the same point: ``key``
+    says which state it shows, ``status_text`` follows it when the run is finished."""
 
-    def __init__(self, run_id: int) -> None:
+    key: tuple[Any, ...]
+    text: str
+    status_text: str | None
+    status: str
+
+
+class ViewerLimitError(Exception):
+    """A viewer over one of the hub's limits; the message says which."""
+
+    def __init__(self, message: str) -> None:
+        super().__init__(message)
+        self.message = message
+
+
+class Viewer:
+    """One WebSocket viewer: a bounded queue and a flag asking for a full frame; ``closed``
+    is set when the hub ends the viewer (its token was revoked), ``close_reason`` says why."""
+
+    def __init__(self, run_id: int, client: str | None = None, token_id: int | None = None) -> None:
         self.run_id = run_id
+        self.client = client
+        self.token_id = token_id
         self.queue: asyncio.Queue[str] = asyncio.Queue(maxsize=VIEWER_QUEUE)
         self.needs_full = False
         self.wakeup = asyncio.Event()
+        self.closed = asyncio.Event()
+        self.close_reason = ""
+
+    def close(self, reason: str) -> None:
+        self.close_reason = reason
+        self._drain()
+        self.closed.set()
+        self.wakeup.set()
 
     def offer(self, message: str) -> None:
         """Queue an encoded message; a full queue drops everything pending for a full frame."""
-        if self.needs_full:
+        if self.needs_full or self.closed.is_set():
             return
         try:
             self.queue.put_nowait(message)
@@ -94,8 +130,11 @@ class Viewer:
             self.queue.get_nowait()
 
     async def next(self) -> str | None:
-        """The next encoded message to send, or ``None`` when a full frame is due."""
+        """The next encoded message to send, or ``None`` when a full frame is due; waits
+        forever once the viewer is closed (whoever serves it watches ``closed``)."""
         while True:
+            if self.closed.is_set():
+                await asyncio.Future()  # never completes: the caller is cancelled
             if self.needs_full:
                 self.needs_full = False
                 return None
@@ -106,23 +145,102 @@ class Viewer:
 
 
 class LiveHub:
-    def __init__(self) -> None:
+    def __init__(
+        self,
+        *,
+        max_per_run: int = 100,
+        max_per_client: int = 200,
+        max_total: int = 500,
+    ) -> None:
         self.live: dict[int, LiveState] = {}
         self.viewers: dict[int, set[Viewer]] = {}
+        self.by_client: dict[str, int] = {}
+        self.by_token: dict[int, set[Viewer]] = {}
+        self.total = 0
+        self.max_per_run = max_per_run
+        self.max_per_client = max_per_client
+        self.max_total = max_total
         self.frames_in = 0
         self.frames_out = 0
+        self.refused = 0
+        # One encoded full frame per watched run: a hundred joiners cost one encoding, not a
+        # hundred (the JSON of a full frame is the costliest thing the event loop does).
+        self.full_frames: dict[int, EncodedFull] = {}
+        self._full_locks: dict[int, asyncio.Lock] = {}
 
-    def subscribe(self, run_id: int) -> Viewer:
-        viewer = Viewer(run_id)
+    def full_lock(self, run_id: int) -> asyncio.Lock:
+        """Held while a run's full frame is built, so concurrent joiners build it once."""
+        lock = self._full_locks.get(run_id)
+        if lock is None:
+            lock = self._full_locks[run_id] = asyncio.Lock()
+        return lock
+
+    def keep_full(self, run_id: int, full: EncodedFull) -> None:
+        if run_id in self.viewers:
+            self.full_frames[run_id] = full
+
+    def subscribe(
+        self, run_id: int, *, client: str | None = None, token_id: int | None = None
+    ) -> Viewer:
+        """A new viewer of ``run_id``; :class:`ViewerLimitError` past a limit.
+
+        Checked and counted without an ``await`` in between, so concurrent handshakes can
+        never overshoot a limit."""
+        if self.total >= self.max_total:
+            self.refused += 1
+            raise ViewerLimitError(f"the server has its maximum of {self.max_total} live viewers")
+        if len(self.viewers.get(run_id, ())) >= self.max_per_run:
+            self.refused += 1
+            raise ViewerLimitError(f"run {run_id} has its maximum of {self.max_per_run} viewers")
+        if client is not None and self.by_client.get(client, 0) >= self.max_per_client:
+            self.refused += 1
+            raise ViewerLimitError(
+                f"this client has its maximum of {self.max_per_client} live viewers"
+            )
+        viewer = Viewer(run_id, client, token_id)
         self.viewers.setdefault(run_id, set()).add(viewer)
+        if client is not None:
+            self.by_client[client] = self.by_client.get(client, 0) + 1
+        if token_id is not None:
+            self.by_token.setdefault(token_id, set()).add(viewer)
+        self.total += 1
         return viewer
 
     def unsubscribe(self, viewer: Viewer) -> None:
         viewers = self.viewers.get(viewer.run_id)
-        if viewers is not None:
-            viewers.discard(viewer)
-            if not viewers:
-                del self.viewers[viewer.run_id]
+        if viewers is None or viewer not in viewers:
+            return
+        viewers.discard(viewer)
+        if not viewers:
+            del self.viewers[viewer.run_id]
+            self.full_frames.pop(viewer.run_id, None)
+            self._full_locks.pop(viewer.run_id, None)
+        self.total -= 1
+        if viewer.client is not None:
+            left = self.by_client[viewer.client] - 1
+            if left:
+                self.by_client[viewer.client] = left
+            else:
+                del self.by_client[viewer.client]
+        if viewer.token_id is not None:
+            mine = self.by_token[viewer.token_id]
+            mine.discard(viewer)
+            if not mine:
+                del self.by_token[viewer.token_id]
+
+    def token_ids(self) -> list[int]:
+        """The tokens that viewers are connected with now."""
+        return list(self.by_token)
+
+    def close_tokens(self, token_ids: set[int] | list[int], reason: str) -> int:
+        """Close every viewer connected with one of ``token_ids``; how many were closed."""
+        closed = 0
+        for token_id in token_ids:
+            for viewer in self.by_token.get(token_id, set()):
+                if not viewer.closed.is_set():
+                    viewer.close(reason)
+                    closed += 1
+        return closed
 
     def state(self, run_id: int) -> LiveState | None:
         return self.live.get(run_id)
@@ -162,7 +280,7 @@ class LiveHub:
             return
         viewers = self.viewers.get(run_id, ())
         if viewers:
-            text = _encode(tick.delta().to_json())  # encoded once for every viewer
+            text = encode(tick.delta().to_json())  # encoded once for every viewer
             for viewer in viewers:
                 viewer.offer(text)
                 self.frames_out += 1
@@ -171,7 +289,7 @@ class LiveHub:
         state = self.live.get(frame.run_id)
         if state is not None:
             state.status, state.error = frame.status, frame.error
-        text = _encode(frame.to_json())
+        text = encode(frame.to_json())
         for viewer in self.viewers.get(frame.run_id, ()):
             viewer.offer(text)
         if frame.status in FINISHED:
@@ -182,5 +300,5 @@ class LiveHub:
             viewer.resync()
 
 
-def _encode(frame: dict[str, Any]) -> str:
+def encode(frame: dict[str, Any]) -> str:
     return json.dumps(frame, separators=(",", ":"))

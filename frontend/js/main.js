@@ -5,6 +5,7 @@ import { h, icon, ICONS, qs, qsa, toast } from "./dom.js";
 import { loadPlotly } from "./plot.js";
 import { poll } from "./poll.js";
 import { Router } from "./router.js";
+import { loadScopes } from "./scopes.js";
 import * as batches from "./views/batches.js";
 import * as compare from "./views/compare.js";
 import * as datasets from "./views/datasets.js";
@@ -119,6 +120,7 @@ function askForToken() {
 function boot() {
   initTheme();
   onUnauthorized(askForToken);
+  loadScopes();
   window.addEventListener(EVT.currentRun, (e) => showCurrentRun(e.detail));
   const router = new Router(ROUTES, qs(SEL.main), { onChange: (section) => highlightNav(section) });
   // The first view is on screen before the browser spends its second on Plotly.js.

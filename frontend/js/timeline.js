@@ -6,6 +6,7 @@
  */
 import { api, showError } from "./api.js";
 import { fmt, fmtInt, h, icon, ICONS, toast } from "./dom.js";
+import { SCOPE } from "./scopes.js";
 
 const PLAY_STEP_MS = 650;
 const PLAY_TOTAL_MS = 8000;
@@ -91,7 +92,12 @@ export class VersionTimeline {
     });
     this.labelForm = h(
       "form",
-      { class: "row", novalidate: true, "aria-label": "Label this version" },
+      {
+        class: "row",
+        novalidate: true,
+        "aria-label": "Label this version",
+        "data-needs": SCOPE.run,
+      },
       h("label", { for: "version-label", style: { margin: 0 } }, "Label"),
       h("div", { class: "field", style: { margin: 0, flex: 1 } }, this.labelInput),
       h(
@@ -102,7 +108,13 @@ export class VersionTimeline {
       ),
       h(
         "button",
-        { type: "button", class: "small", "data-base-map": "", onclick: () => this.saveBaseMap() },
+        {
+          type: "button",
+          class: "small",
+          "data-base-map": "",
+          "data-needs": SCOPE.admin,
+          onclick: () => this.saveBaseMap(),
+        },
         "Save as base map",
       ),
     );

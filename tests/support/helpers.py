@@ -88,9 +88,11 @@ def reference_run(
 
 
 def service_settings(database_url: str, **overrides: object) -> Settings:
-    """Settings of a test app: 2 run workers, no demo, fast cancel polling."""
+    """Settings of a test app: 2 run workers, no demo, fast cancel polling, and the
+    TestClient's host (``testserver``) among the allowed hosts."""
     base: dict[str, object] = {
         "database_url": database_url,
+        "allowed_hosts": ["testserver"],
         "run_workers": 2,
         "seed_demo": False,
         "cancel_poll_s": 0.05,

@@ -13,6 +13,7 @@ from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse, Resp
 from starlette.staticfiles import StaticFiles
 from starlette.types import Scope
 
+from app.api.security import content_security_policy
 from app.errors import NotFoundError
 from app.resources import resource_dir
 
@@ -104,7 +105,10 @@ def _index() -> HTMLResponse:
     if not index.is_file():
         raise NotFoundError("the dashboard is not installed (frontend/index.html is missing)")
     html = render_index(index.read_text(encoding="utf-8"), asset_versions())
-    return HTMLResponse(html, headers=NO_CACHE)
+    # The import map is an inline script: the policy allows it by its hash, nothing else.
+    return HTMLResponse(
+        html, headers=NO_CACHE | {"Content-Security-Policy": content_security_policy(html)}
+    )
 
 
 for _route in VIEW_ROUTES:

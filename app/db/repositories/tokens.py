@@ -7,20 +7,21 @@ from sqlalchemy.orm import Session
 
 from app.db.models import ApiTokenRow, utcnow
 from app.db.repositories.base import from_row
-from app.domain import ApiToken
+from app.domain import SCOPES, ApiToken
 from app.errors import NotFoundError
 
 
 def _token(row: ApiTokenRow) -> ApiToken:
-    return from_row(ApiToken, row)
+    scopes = tuple(s for s in SCOPES if s in row.scopes.split(","))
+    return from_row(ApiToken, row, scopes=scopes)
 
 
 class TokenRepo:
     def __init__(self, session: Session) -> None:
         self.s = session
 
-    def add(self, *, name: str, prefix: str, token_hash: str) -> ApiToken:
-        row = ApiTokenRow(name=name, prefix=prefix, token_hash=token_hash)
+    def add(self, *, name: str, prefix: str, token_hash: str, scopes: tuple[str, ...]) -> ApiToken:
+        row = ApiTokenRow(name=name, prefix=prefix, token_hash=token_hash, scopes=",".join(scopes))
         self.s.add(row)
         self.s.flush()
         return _token(row)
@@ -43,6 +44,13 @@ class TokenRepo:
         )
         row = self.s.scalars(q).first()
         return None if row is None else _token(row)
+
+    def active_ids(self, token_ids: list[int]) -> set[int]:
+        """Those of ``token_ids`` that still exist and are not revoked."""
+        q = select(ApiTokenRow.id).where(
+            ApiTokenRow.id.in_(token_ids), ApiTokenRow.revoked_at.is_(None)
+        )
+        return set(self.s.scalars(q))
 
     def touch(self, token_id: int) -> None:
         self.s.execute(

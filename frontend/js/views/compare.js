@@ -27,6 +27,7 @@ import { diffNested, sameGrid } from "../grid-math.js";
 import { MapPlot, SliceGroup } from "../map-plot.js";
 import { axis, baseLayout, purge, react, SERIES_COLORS } from "../plot.js";
 import { poll } from "../poll.js";
+import { SCOPE } from "../scopes.js";
 import { decimate, SeriesStore } from "../series.js";
 
 export const title = "Runs & compare";
@@ -72,7 +73,12 @@ export async function mount(root, ctx) {
         ? "Final maps on one colour scale, their differences, errors overlaid, and metrics side by side."
         : "Every run so far. Tick the runs to compare (usually the same data through several estimators).",
       actions: [
-        h("a", { class: "button primary", href: "/runs/new" }, icon(ICONS.plus), "New run"),
+        h(
+          "a",
+          { class: "button primary", href: "/runs/new", "data-needs": SCOPE.run },
+          icon(ICONS.plus),
+          "New run",
+        ),
       ],
     }),
   );

@@ -6,6 +6,7 @@
  */
 import { api, clearErrors, estimators, scenarios, showError } from "../api.js";
 import { EVT, SELECT } from "../constants.js";
+import { needs, SCOPE } from "../scopes.js";
 import {
   card,
   clear,
@@ -175,6 +176,7 @@ export async function mount(root, ctx) {
                 class: "button small",
                 href: `/runs/new?dataset=${d.id}`,
                 "aria-label": `New run on ${d.name}`,
+                "data-needs": SCOPE.run,
               },
               icon(ICONS.play),
               "New run",
@@ -186,6 +188,7 @@ export async function mount(root, ctx) {
                 type: "button",
                 "aria-label": `Delete dataset ${d.name}`,
                 title: "Delete",
+                "data-needs": SCOPE.admin,
                 onclick: () => remove(d),
               },
               icon(ICONS.trash),
@@ -485,7 +488,7 @@ function uploadCard(ctx, onCreated) {
     }
   });
 
-  return card({ title: "Upload a log", body: form });
+  return needs(SCOPE.run, card({ title: "Upload a log", body: form }));
 }
 
 /** A problem with one CSV column is shown on that column's row; others next to the file or form. */
@@ -639,7 +642,7 @@ function simulateCard(ctx, onCreated) {
       submit.replaceChildren(icon(ICONS.flask), "Simulate");
     }
   });
-  return card({ title: "Simulate a scenario", hint: "known truth", body: form });
+  return needs(SCOPE.run, card({ title: "Simulate a scenario", hint: "known truth", body: form }));
 }
 
 /* ---------- channel previews ---------- */

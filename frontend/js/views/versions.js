@@ -8,6 +8,7 @@ import { EVT, EXPORT_FORMATS } from "../constants.js";
 import { card, fmt, fmtInt, h, icon, ICONS, pageHead, toast } from "../dom.js";
 import { diffNested, sameGrid } from "../grid-math.js";
 import { MapPlot, SliceGroup } from "../map-plot.js";
+import { SCOPE } from "../scopes.js";
 
 export const title = "Versions";
 
@@ -141,7 +142,7 @@ export async function mount(root, ctx) {
           labelInput,
           h(
             "button",
-            { type: "submit", class: "small", "data-save-label": key },
+            { type: "submit", class: "small", "data-save-label": key, "data-needs": SCOPE.run },
             icon(ICONS.tag),
             "Save",
           ),
@@ -182,7 +183,11 @@ export async function mount(root, ctx) {
         showError(form, err);
       }
     });
-    const baseBtn = h("button", { type: "button", "data-base-map": key }, "Save as base map");
+    const baseBtn = h(
+      "button",
+      { type: "button", "data-base-map": key, "data-needs": SCOPE.admin },
+      "Save as base map",
+    );
     baseBtn.addEventListener("click", async () => {
       try {
         const map = await api.post("/api/base-maps", {

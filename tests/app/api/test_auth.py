@@ -104,7 +104,7 @@ def test_every_openapi_route_refuses_no_token_and_a_bad_token(
     secured: tuple[TestClient, str],
 ) -> None:
     client, _ = secured
-    spec = client.get("/openapi.json").json()
+    spec = client.app.openapi()  # type: ignore[attr-defined]
     checked = 0
     for path, operations in spec["paths"].items():
         for method in operations:
@@ -117,6 +117,10 @@ def test_every_openapi_route_refuses_no_token_and_a_bad_token(
                 assert response.json()["error"]["code"] == "unauthorized"
                 checked += 1
     assert checked >= 2 * 25
+    for page in ("/openapi.json", "/docs", "/redoc"):  # the API's rule, not open
+        for headers in ({}, {"Authorization": "Bearer mw_not-a-token"}):
+            response = client.get(page, headers=headers)
+            assert response.status_code == 401, (page, headers)
 
 
 def test_websocket_refuses_no_token_a_bad_token_and_a_foreign_origin(
@@ -158,3 +162,119 @@ def test_responses_carry_nosniff_and_safe_download_names(client: TestClient) -> 
         'attachment; filename="x_filename_.._.._etc_passwd_Set-Cookie_a_b"'
     )
     assert content_disposition("...") == 'attachment; filename="download"'
+
+
+def _token(url: str, capsys: pytest.CaptureFixture[str], *scopes: str) -> dict[str, str]:
+    args = ["token", "create", "--name", "-".join(scopes) or "default", "--database-url", url]
+    for scope in scopes:
+        args += ["--scope", scope]
+    code, out, err = _cli(args, capsys)
+    assert code == 0, err
+    return {"Authorization": f"Bearer {out.strip()}"}
+
+
+def test_every_writing_route_has_a_declared_scope(secured: tuple[TestClient, str]) -> None:
+    """A new POST/PATCH/DELETE route must be put in ROUTE_SCOPES on purpose (else: admin)."""
+    from app.api.deps import ROUTE_SCOPES
+
+    client, _ = secured
+    writes = {
+        f"{method.upper()} {path.removeprefix('/api')}"
+        for path, operations in client.app.openapi()["paths"].items()  # type: ignore[attr-defined]
+        for method in operations
+        if method.upper() not in ("GET", "HEAD", "OPTIONS")
+    }
+    assert writes == set(ROUTE_SCOPES)
+    assert ROUTE_SCOPES["DELETE /datasets/{dataset_id}"] == "admin"
+    assert ROUTE_SCOPES["POST /base-maps"] == "admin"
+
+
+def test_scopes_gate_each_route_and_name_the_missing_scope(
+    secured: tuple[TestClient, str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    """read / run / admin tokens against every API operation: a missing scope is a 403
+    ``insufficient_scope`` naming it; a token with the scope gets past the gate."""
+    from app.api.deps import route_scope
+
+    client, url = secured
+    tokens = {
+        ("read",): _token(url, capsys, "read"),
+        ("read", "run"): _token(url, capsys),  # the default
+        ("read", "run", "admin"): _token(url, capsys, "read", "run", "admin"),
+        ("admin",): _token(url, capsys, "admin"),
+    }
+    checked = 0
+    for path, operations in client.app.openapi()["paths"].items():  # type: ignore[attr-defined]
+        if path == "/api/health":
+            continue
+        for method in operations:
+            needed = route_scope(method, path)
+            for scopes, auth in tokens.items():
+                response = client.request(method, _concrete(path), headers=auth)
+                if needed in scopes:
+                    assert response.status_code not in (401, 403), (method, path, scopes)
+                else:
+                    assert response.status_code == 403, (method, path, scopes, response.text)
+                    error = response.json()["error"]
+                    assert error["code"] == "insufficient_scope"
+                    assert repr(needed) in error["message"]
+                    assert f'scope="{needed}"' in response.headers["www-authenticate"]
+                checked += 1
+    assert checked >= 4 * 25
+    # the docs pages follow the API: read is enough, no token is not
+    assert client.get("/openapi.json", headers=tokens[("read",)]).status_code == 200
+    assert client.get("/docs", headers=tokens[("read",)]).status_code == 200
+    assert client.get("/docs", headers=tokens[("admin",)]).status_code == 403
+
+
+def test_me_reports_the_callers_scopes(
+    secured: tuple[TestClient, str], client: TestClient, capsys: pytest.CaptureFixture[str]
+) -> None:
+    secured_client, url = secured
+    auth = _token(url, capsys, "read")
+    me = secured_client.get("/api/me", headers=auth).json()
+    assert me["scopes"] == ["read"]
+    assert me["auth_required"] is True
+    assert isinstance(me["token_id"], int)
+    assert secured_client.get("/api/me").status_code == 401
+    # auth off (loopback, no tokens): everything, as before scopes existed
+    assert client.get("/api/me").json() == {
+        "auth_required": False,
+        "token_id": None,
+        "scopes": ["read", "run", "admin"],
+    }
+
+
+def test_token_create_defaults_to_read_and_run_and_refuses_unknown_scopes(
+    secured: tuple[TestClient, str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    _, url = secured
+    code, _, err = _cli(["token", "create", "--name", "dflt", "--database-url", url], capsys)
+    assert code == 0
+    assert "scopes read,run" in err
+    code, _, err = _cli(
+        ["token", "create", "--name", "a", "--scope", "admin", "--database-url", url], capsys
+    )
+    assert code == 0
+    assert "scopes admin" in err
+    code, _, err = _cli(
+        ["token", "create", "--name", "x", "--scope", "root", "--database-url", url], capsys
+    )
+    assert code == 2
+    assert "invalid choice: 'root'" in err
+    code, out, _ = _cli(["token", "list", "--database-url", url], capsys)
+    assert re.search(r"active\s+read,run\s+last used never\s+dflt", out), out
+
+
+def test_a_websocket_needs_the_read_scope(
+    secured: tuple[TestClient, str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    client, url = secured
+    secret = _token(url, capsys, "run")["Authorization"].removeprefix("Bearer ")
+    with (
+        pytest.raises(WebSocketDisconnect) as closed,
+        client.websocket_connect(f"/api/runs/1/stream?token={secret}") as ws,
+    ):
+        ws.receive_json()
+    assert closed.value.code == 1008
+    assert "'read'" in (closed.value.reason or "")

@@ -7,6 +7,7 @@ from alembic import command
 from alembic.autogenerate import compare_metadata
 from alembic.runtime.migration import MigrationContext
 from alembic.script import ScriptDirectory
+from sqlalchemy import text
 
 from app.db.engine import make_engine
 from app.db.migrate import alembic_config, check_schema, current_revision, head_revision, upgrade
@@ -134,3 +135,78 @@ def test_data_survives_upgrade_downgrade_upgrade_from_the_previous_schema(
         assert _drift(url) == []
     finally:
         engine.dispose()
+
+
+def test_tokens_from_before_scopes_get_every_scope(backend: str, fresh_url) -> None:  # type: ignore[no-untyped-def]
+    """A token created at 0004 keeps working for everything after the upgrade."""
+    from datetime import UTC, datetime
+
+    from app.db.engine import Database
+    from app.services.tokens import TokenService, hash_token
+
+    url = fresh_url(backend)
+    upgrade(url, "0004")
+    engine = make_engine(url)
+    try:
+        with engine.begin() as connection:
+            connection.execute(
+                text(
+                    "INSERT INTO api_tokens (name, prefix, token_hash, created_at) "
+                    "VALUES ('old', 'mw_old', :h, :t)"
+                ),
+                {"h": hash_token("mw_old-secret"), "t": datetime(2026, 1, 1, tzinfo=UTC)},
+            )
+    finally:
+        engine.dispose()
+    upgrade(url)
+    db = Database(url)
+    try:
+        token = TokenService(db).verify("mw_old-secret")
+        assert token is not None
+        assert token.scopes == ("read", "run", "admin")
+        fresh, _ = TokenService(db).create("new")
+        assert fresh.scopes == ("read", "run")
+    finally:
+        db.dispose()
+
+
+def test_sqlite_never_reuses_an_id_after_a_delete(fresh_url) -> None:  # type: ignore[no-untyped-def]
+    """create, delete, create: the new row's id is larger (an old link never shows other
+    data), for every table, on a database upgraded from the previous revision."""
+    url = fresh_url("sqlite")
+    upgrade(url, "0004")
+    upgrade(url)
+    engine = make_engine(url)
+    try:
+        with engine.connect() as connection:
+            rows = connection.execute(text("SELECT name, sql FROM sqlite_master"))
+            sql = {name: create for name, create in rows}
+        for table in Base.metadata.tables:
+            assert "AUTOINCREMENT" in sql[table], table
+        with engine.begin() as connection:
+            insert = (
+                "INSERT INTO run_groups (kind, name, estimator, request, created_at) "
+                "VALUES ('sweep', 'g', 'skf', '{}', '2026-01-01')"
+            )
+            first = connection.execute(text(insert)).lastrowid
+            second = connection.execute(text(insert)).lastrowid
+            connection.execute(text("DELETE FROM run_groups WHERE id = :i"), {"i": second})
+            third = connection.execute(text(insert)).lastrowid
+        assert first < second < third
+    finally:
+        engine.dispose()
+
+
+def test_ids_are_not_reused_through_the_api(client) -> None:  # type: ignore[no-untyped-def]
+    """Through the service on either backend: a deleted dataset's id is never given out
+    again."""
+    body = {"scenario": "skf-sim1", "seed": 1, "duration_s": 2.0}
+    ids = []
+    for _ in range(2):
+        response = client.post("/api/datasets/simulate", json=body)
+        assert response.status_code == 201, response.text
+        ids.append(response.json()["id"])
+    assert client.delete(f"/api/datasets/{ids[1]}").status_code == 204
+    response = client.post("/api/datasets/simulate", json=body)
+    assert response.status_code == 201
+    assert response.json()["id"] > ids[1]

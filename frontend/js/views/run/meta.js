@@ -18,6 +18,7 @@ import {
   statusBadge,
 } from "../../dom.js";
 import { exportMenu } from "../../export-menu.js";
+import { SCOPE } from "../../scopes.js";
 
 /** Metrics shown by cards of their own (or not at all). */
 const OWN_CARDS = new Set(["samples", "accepted", "run_s"]);
@@ -58,13 +59,19 @@ export function runMeta(v, { onCancel, onResume }) {
   const conn = h("span", { class: "legend-note", "data-connection": "" });
   const cancelBtn = h(
     "button",
-    { type: "button", class: "danger", "data-cancel": "", onclick: onCancel },
+    {
+      type: "button",
+      class: "danger",
+      "data-cancel": "",
+      "data-needs": SCOPE.run,
+      onclick: onCancel,
+    },
     icon(ICONS.stop),
     "Cancel",
   );
   const resumeBtn = h(
     "button",
-    { type: "button", "data-resume": "", onclick: onResume },
+    { type: "button", "data-resume": "", "data-needs": SCOPE.run, onclick: onResume },
     icon(ICONS.resume),
     "Resume",
   );
