@@ -14,6 +14,7 @@ from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.routing import Match
 
 from estimation.errors import EstimationError
 
@@ -91,6 +92,17 @@ class UnauthorizedError(AppError):
     status = 401
 
 
+class InsufficientScopeError(AppError):
+    """The token is valid but lacks the scope the route needs (RFC 6750 §3.1)."""
+
+    code = "insufficient_scope"
+    status = 403
+
+    def __init__(self, message: str, *, scope: str) -> None:
+        super().__init__(message)
+        self.scope = scope
+
+
 class MethodNotAllowedError(AppError):
     code = "method_not_allowed"
     status = 405
@@ -100,9 +112,35 @@ def error_response(error: AppError) -> JSONResponse:
     headers = None
     if isinstance(error, UnauthorizedError):
         headers = {"WWW-Authenticate": "Bearer"}
+    elif isinstance(error, InsufficientScopeError):
+        headers = {"WWW-Authenticate": f'Bearer error="insufficient_scope", scope="{error.scope}"'}
     elif isinstance(error, DatabaseUnavailableError):
         headers = {"Retry-After": "2"}
     return JSONResponse(error.body(), status_code=error.status, headers=headers)
+
+
+_METHODS = ("GET", "HEAD", "POST", "PUT", "PATCH", "DELETE", "OPTIONS")
+
+
+def allowed_methods(request: Request) -> list[str]:
+    """Every method some route serves at the request's path.
+
+    Starlette's 405 names only the methods of the first route whose path matched, while
+    ``GET /x/{id}`` and ``DELETE /x/{id}`` are two routes: each method is asked of every
+    route instead (``BaseRoute.matches`` with a scope of that method).
+    """
+    allowed = []
+    for method in _METHODS:
+        scope = {
+            "type": "http",
+            "method": method,
+            "path": request.scope["path"],
+            "root_path": request.scope.get("root_path", ""),
+            "headers": [],
+        }
+        if any(route.matches(scope)[0] == Match.FULL for route in request.app.router.routes):
+            allowed.append(method)
+    return allowed
 
 
 def field_of(loc: tuple[Any, ...] | list[Any]) -> str | None:
@@ -142,19 +180,26 @@ def install_error_handlers(app: FastAPI) -> None:
         return error_response(InvalidRequestError(message, field=field_of(first.get("loc", ()))))
 
     @app.exception_handler(StarletteHTTPException)
-    async def _http(_: Request, exc: StarletteHTTPException) -> JSONResponse:
+    async def _http(request: Request, exc: StarletteHTTPException) -> JSONResponse:
         error: AppError
+        headers = dict(exc.headers or {})
         if exc.status_code == 404:
             error = NotFoundError(str(exc.detail) if exc.detail != "Not Found" else "no such route")
         elif exc.status_code == 405:
-            error = MethodNotAllowedError("method not allowed on this route")
+            allowed = allowed_methods(request)
+            if allowed and request.method not in allowed:
+                headers["Allow"] = ", ".join(allowed)
+            error = MethodNotAllowedError(
+                f"{request.method} is not allowed on this route; allowed: {headers['Allow']}"
+                if headers.get("Allow")
+                else "method not allowed on this route"
+            )
         else:
             error = AppError(str(exc.detail))
             error.status = exc.status_code
             error.code = "http_error"
         response = error_response(error)
-        if exc.headers:
-            response.headers.update(exc.headers)
+        response.headers.update(headers)
         return response
 
     @app.exception_handler(EstimationError)

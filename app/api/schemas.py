@@ -6,12 +6,14 @@ Routers build these from domain objects; arrays are nested lists with ``null`` f
 from __future__ import annotations
 
 from datetime import datetime
-from typing import Any, Generic, Literal, TypeVar
+from typing import Annotated, Any, Generic, Literal, TypeVar
 
 from pydantic import BaseModel, ConfigDict, Field
 
 from app.domain import BaseMap, Dataset, MapVersion, Run, RunStatus, SeriesRole, VersionSummary
 from app.io.decimate import nested_or_none
+from app.io.names import name_schema
+from app.services.catalog import ScenarioName
 
 T = TypeVar("T")
 
@@ -29,7 +31,7 @@ class ErrorOut(BaseModel):
 
 
 ERRORS: dict[int | str, dict[str, Any]] = {
-    code: {"model": ErrorOut} for code in (400, 401, 404, 405, 409, 413, 415, 422)
+    code: {"model": ErrorOut} for code in (400, 401, 403, 404, 405, 409, 413, 415, 422)
 }
 
 
@@ -89,13 +91,36 @@ class DatasetOut(BaseModel):
         )
 
 
-class SimulateIn(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+def _duration_per_scenario(schema: dict[str, Any]) -> None:
+    """Each scenario's own ``duration_s`` range in the schema: at least two samples, at most
+    its length (what the service checks)."""
+    from estimation.scenarios import scenarios
 
-    scenario: str = Field(min_length=1)
-    seed: int = Field(0, ge=0, le=2**31 - 1)
-    name: str | None = Field(None, max_length=200)
-    duration_s: float | None = Field(None, gt=0, description="Simulate only the first S s.")
+    schema["anyOf"] = [
+        {
+            "properties": {
+                "scenario": {"const": name},
+                "duration_s": {
+                    "anyOf": [
+                        {"type": "number", "minimum": 1 / s.rate_hz, "maximum": s.duration_s},
+                        {"type": "null"},
+                    ]
+                },
+            }
+        }
+        for name, s in sorted(scenarios().items())
+    ]
+
+
+class SimulateIn(BaseModel):
+    model_config = ConfigDict(extra="forbid", json_schema_extra=_duration_per_scenario)
+
+    scenario: ScenarioName
+    seed: int = Field(0, ge=0, le=2**31 - 1, strict=True)  # not `false` as 0
+    name: Annotated[str, Field(max_length=200, json_schema_extra=name_schema)] | None = None
+    duration_s: float | None = Field(
+        None, gt=0, strict=True, description="Simulate only the first S s."
+    )
 
 
 class PreviewChannel(BaseModel):

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from app.io.errors import InputError
+from app.io.names import check_name
 from estimation import Signals
 from estimation.errors import SignalError
 
@@ -30,6 +31,13 @@ DELIMITERS = ",;\t"
 _HEADER_UNIT = re.compile(r"^\s*(?P<name>.+?)\s*\[(?P<unit>[^\]]*)\]\s*$")
 _DECIMAL_COMMA = re.compile(r"^\s*[+-]?\d+,\d+([eE][+-]?\d+)?\s*$")
 _DECIMAL_POINT = re.compile(r"\d\.\d")
+# The one number syntax of a cell: plain ASCII digits, sign, point, exponent (and the NaN/inf
+# spellings, which the finite check then refuses with its own message). float() alone would
+# also take ``1_000``, Arabic-Indic or fullwidth digits and non-ASCII spaces.
+_NUMBER = re.compile(
+    r"\s*[+-]?(?:(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|nan|inf|infinity)\s*",
+    re.IGNORECASE | re.ASCII,
+)
 CHUNK_ROWS = 20_000
 
 
@@ -107,6 +115,7 @@ def parse_csv(
     delimiter = sniff_delimiter([ln for _, ln in lines[:20]])
     rows = list(csv.reader([ln for _, ln in lines[:2]], delimiter=delimiter))
     numbers = [n for n, _ in lines]
+    _check_delimiters(lines[:20], delimiter, rows[0])
     names, header_units = _split_header(rows[0], header_line)
     if max_columns is not None and len(names) > max_columns:
         raise LogFormatError(
@@ -173,11 +182,17 @@ def parse_csv(
     return CsvLog(signals, time_column, delimiter, decimal)
 
 
+def split_lines(text: str) -> list[str]:
+    """Lines ended by LF, CRLF or CR only: :meth:`str.splitlines` also breaks at U+0085,
+    U+2028 and U+2029, which may sit inside a cell (and must then be judged there)."""
+    return text.replace("\r\n", "\n").replace("\r", "\n").split("\n")
+
+
 def _content_lines(text: str) -> list[tuple[int, str]]:
     """Non-blank, non-comment lines with their 1-based line numbers."""
     return [
         (n, ln)
-        for n, ln in enumerate(text.splitlines(), start=1)
+        for n, ln in enumerate(split_lines(text), start=1)
         if ln.strip() and not ln.lstrip().startswith("#")
     ]
 
@@ -203,6 +218,56 @@ def sniff_delimiter(sample_lines: list[str]) -> str:
         return best if counts[best] else ","
 
 
+def _check_delimiters(sample: list[tuple[int, str]], delimiter: str, header: list[str]) -> None:
+    """Refuse a file whose lines are split by different delimiters, naming the line.
+
+    Two signatures: a row that has the header's field count only when split at another
+    delimiter; and a header cell holding another delimiter that recurs in exactly the same
+    columns of every sampled row (``time,a;b`` over ``0,1;2``) — a decimal comma would put
+    commas in the values, never only where the names have them.
+    """
+    header_line = sample[0][0]
+    width = len(header)
+    for number, text in sample[1:]:
+        if '"' not in text and text.count(delimiter) + 1 != width:
+            other = _splits_into(text, delimiter, width)
+            if other is not None:
+                raise LogFormatError(
+                    _mixed_message(number, other, delimiter), field="file", line=number
+                )
+    for other in DELIMITERS.replace(delimiter, ""):
+        in_header = [cell.count(other) for cell in header]
+        if not any(in_header) or any('"' in text for _, text in sample):
+            continue
+        rows = [text.split(delimiter) for _, text in sample[1:]]
+        if rows and all(
+            len(row) == width and [c.count(other) for c in row] == in_header for row in rows
+        ):
+            cell = header[next(j for j, n in enumerate(in_header) if n)]
+            raise LogFormatError(
+                f"line {header_line}: the delimiter is inconsistent: column {cell.strip()!r} "
+                f"contains {other!r} though the columns are separated by {delimiter!r} (the "
+                f"rows have {other!r} in the same places); use one delimiter throughout",
+                field="header",
+                line=header_line,
+            )
+
+
+def _splits_into(text: str, delimiter: str, width: int) -> str | None:
+    """The other delimiter that splits ``text`` into ``width`` fields, if one does."""
+    for other in DELIMITERS.replace(delimiter, ""):
+        if text.count(other) and text.count(other) + 1 == width:
+            return other
+    return None
+
+
+def _mixed_message(line: int, other: str, delimiter: str) -> str:
+    return (
+        f"line {line}: the delimiter is inconsistent: this row is separated by {other!r}, "
+        f"the header by {delimiter!r}; use one delimiter throughout"
+    )
+
+
 def sniff_decimal(rows: list[list[str]], delimiter: str) -> str:
     if delimiter == ",":
         return "."
@@ -221,6 +286,10 @@ def _split_header(header: list[str], line: int) -> tuple[list[str], list[str]]:
             raise LogFormatError(
                 f"line {line}: empty column name in the header", field="header", line=line
             )
+        try:
+            name = check_name(name, field="header", what="column name", line=line)
+        except InputError as exc:
+            raise LogFormatError(exc.message, field="header", line=line) from None
         names.append(name)
         units.append(unit)
     dupes = sorted(n for n, count in Counter(names).items() if count > 1)
@@ -248,11 +317,13 @@ def _columns(body: list[str], lines: list[int], delimiter: str, width: int) -> l
         counts = [ln.count(delimiter) + 1 for ln in body]
     for k, count in enumerate(counts):
         if count != width:
-            raise LogFormatError(
-                f"line {lines[k]}: {count} fields, header has {width}",
-                field="file",
-                line=lines[k],
+            other = None if rows is not None else _splits_into(body[k], delimiter, width)
+            message = (
+                _mixed_message(lines[k], other, delimiter)
+                if other is not None
+                else f"line {lines[k]}: {count} fields, header has {width}"
             )
+            raise LogFormatError(message, field="file", line=lines[k])
     if rows is not None:
         return [list(col) for col in zip(*rows, strict=True)]
     cells = joined.replace("\n", delimiter).split(delimiter)
@@ -292,11 +363,7 @@ def _is_units_row(cells: list[str]) -> bool:
 
 
 def _is_number(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return _DECIMAL_COMMA.match(text) is not None
-    return True
+    return _NUMBER.fullmatch(text) is not None or _DECIMAL_COMMA.match(text) is not None
 
 
 def _parse_column(
@@ -308,6 +375,19 @@ def _parse_column(
     to name the first bad line.
     """
     texts = [c.replace(",", ".") for c in cells] if decimal == "," else list(cells)
+    joined = "".join(texts)
+    if not joined.isascii() or "_" in joined:  # only then can float() and _NUMBER disagree
+        k = next((k for k, t in enumerate(texts) if _NUMBER.fullmatch(t) is None), None)
+        if k is not None and not strict:
+            return None
+        if k is not None and _looks_numeric(texts[k]):
+            raise LogFormatError(
+                f"line {lines[k]}, column {name!r}: {cells[k].strip()!r} is not a plain number "
+                "(ASCII digits 0-9 with an optional sign, decimal point and exponent; no digit "
+                "separators)",
+                field=name,
+                line=lines[k],
+            )
     try:
         out = np.array(texts, dtype=np.float64) if texts else np.empty(0)
     except ValueError:
@@ -316,14 +396,12 @@ def _parse_column(
         if not strict:
             return None
         for k, text in enumerate(texts):
-            try:
-                float(text)
-            except ValueError:
+            if _NUMBER.fullmatch(text) is None:
                 shown = cells[k].strip()
                 what = "empty value" if not shown else f"non-numeric value {shown!r}"
                 raise LogFormatError(
                     f"line {lines[k]}, column {name!r}: {what}", field=name, line=lines[k]
-                ) from None
+                )
         out = np.array([float(t) for t in texts])  # numpy and float() disagree: trust float()
     bad = ~np.isfinite(out)
     if np.any(bad):
@@ -335,6 +413,15 @@ def _parse_column(
             line=lines[k],
         )
     return out
+
+
+def _looks_numeric(text: str) -> bool:
+    """Python would read ``text`` as a number (``1_000``, ``١٢``): worth its own message."""
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def _with_line(message: str, lines: list[int]) -> tuple[str, int | None]:

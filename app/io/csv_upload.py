@@ -6,7 +6,7 @@ from __future__ import annotations
 import re
 from collections.abc import Mapping
 
-from app.io.csv_files import DELIMITERS, parse_csv
+from app.io.csv_files import DELIMITERS, parse_csv, split_lines
 from app.io.errors import InputError, unsupported
 from estimation import Signals
 
@@ -53,7 +53,7 @@ def _reject_unknown_delimiter(text: str) -> None:
     """A header and first row split alike by ``|``, ``:`` or spaces but holding none of
     ``, ; tab`` is a file with an unsupported delimiter."""
     content = []
-    for line in text.splitlines():
+    for line in split_lines(text):
         if line.strip() and not line.lstrip().startswith("#"):
             content.append(line[:4096])
             if len(content) == 2:

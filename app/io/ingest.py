@@ -22,6 +22,7 @@ from typing import BinaryIO
 import numpy as np
 
 from app.io.errors import InputError, too_large, unsupported
+from app.io.names import bad_character, check_name
 from estimation import Signals
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
@@ -173,6 +174,9 @@ def _apply_units(signals: Signals, units: Mapping[str, str] | None) -> Signals:
 def _check_shape(signals: Signals, limits: IngestLimits) -> None:
     if not signals.names:
         raise InputError("no data channels besides the time base", field="file")
+    for name in signals.names:  # the rule of CSV headers, for MCAP and MDF channels too
+        if bad_character(name) is not None:
+            check_name(name, field=name, what="channel name")
     if len(signals.names) > limits.max_channels:
         raise InputError(
             f"{len(signals.names)} channels, the limit is {limits.max_channels}", field="file"

@@ -14,7 +14,9 @@ refused instead of exhausting memory.
 from __future__ import annotations
 
 import io
+import re
 import struct
+import sys
 import zlib
 from typing import Any
 
@@ -110,9 +112,39 @@ def _read_groups(data: bytes) -> list[dict[str, Any]]:
         raise
     except Exception as exc:
         raise InputError(
-            f"unreadable MDF file: {type(exc).__name__}: {exc}".rstrip(": "), field="file"
+            f"the MDF file is truncated or corrupt ({_detail(exc, len(data))})", field="file"
         ) from None
     return groups
+
+
+def _detail(exc: Exception, size: int) -> str:
+    """What asammdf's exception says, in terms of the upload: its messages name the
+    in-memory buffer (``'<_io.BytesIO object at 0x…>' is not a valid MDF file``) or the
+    :mod:`struct` call that ran past the end (``unpack requires a buffer of 8 bytes``)."""
+    text = " ".join(_BUFFER_REPR.sub("the file", str(exc)).split())
+    if isinstance(exc, struct.error):
+        return f"a block ends beyond the end of the {size}-byte file"
+    if "is not a valid MDF file" in text:
+        return "its identification or header block is not valid"
+    return text or type(exc).__name__
+
+
+def _quiet_asammdf_del(unraisable: Any) -> None:
+    """Drop the exception asammdf's ``MDF4.__del__``/``MDF3.__del__`` raises for an object
+    whose constructor failed on a corrupt file (it closes attributes never set): there is
+    nothing to close, and the traceback in the server log would only alarm. Every other
+    unraisable exception goes to the previous hook."""
+    function = unraisable.object
+    if getattr(function, "__name__", "") == "__del__" and getattr(
+        function, "__module__", ""
+    ).startswith("asammdf."):
+        return
+    _previous_hook(unraisable)
+
+
+_BUFFER_REPR = re.compile(r"'?<_io\.BytesIO object at 0x[0-9a-fA-F]+>'?")
+_previous_hook = sys.unraisablehook
+sys.unraisablehook = _quiet_asammdf_del
 
 
 def _usable(group: dict[str, Any], notes: list[str]) -> bool:

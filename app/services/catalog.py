@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel
+from pydantic import BaseModel, Field
 
 from estimation.registry import EstimatorKind, EstimatorSpec, registry
 from estimation.scenarios import scenarios
@@ -23,6 +23,23 @@ TABLE_ROLE = "y"
 _UNIT = re.compile(r"\[([^\]]+)\]")
 # Config keys the run request's table and signals fill in for a table filter.
 TABLE_FILTER_KEYS = ("axes", "output", "output_unit")
+
+
+def _estimator_enum(schema: dict[str, Any]) -> None:
+    # Called when the JSON schema is generated (not at import): the registry imports every
+    # estimator module.
+    schema["enum"] = list(registry())
+
+
+def _scenario_enum(schema: dict[str, Any]) -> None:
+    schema["enum"] = sorted(scenarios())
+
+
+# A request's estimator or scenario: any string validates here (the service refuses an
+# unknown name with a 422 listing the known ones), and the schema lists the names as an
+# enum, so that OpenAPI clients and fuzzers offer only names that exist.
+EstimatorName = Annotated[str, Field(min_length=1, json_schema_extra=_estimator_enum)]
+ScenarioName = Annotated[str, Field(min_length=1, json_schema_extra=_scenario_enum)]
 
 
 @dataclass(frozen=True, slots=True)

@@ -18,18 +18,21 @@ from app.domain import Channel, Dataset, Page, RunStatus
 from app.errors import ConflictError, InvalidRequestError
 from app.io.decimate import finite_or_none, minmax_decimate
 from app.io.ingest import IngestLimits, ingest
+from app.io.names import check_name, without_refused
 from app.io.payload import pack_signals, pack_truth, unpack_signals
-from estimation.errors import ConfigError
+from estimation.errors import EstimationError
 from estimation.scenarios import get_scenario, scenarios
 from estimation.signals import Signals
 
 NAME_MAX = 200
 
 
-def _clean_name(name: str | None, fallback: str) -> str:
-    """A display name: never a path (only the last component of a client filename)."""
-    text = (name or "").replace("\\", "/").rsplit("/", 1)[-1].strip()
-    text = "".join(ch for ch in text if ch.isprintable())
+def _dataset_name(name: str | None, filename: str | None, fallback: str) -> str:
+    """The name as given (422 for a control or format character, :func:`check_name`); without
+    one, the last component of the client's file name (its own directories say nothing)."""
+    if name is not None and name.strip():
+        return check_name(name, field="name")[:NAME_MAX]
+    text = without_refused((filename or "").replace("\\", "/").rsplit("/", 1)[-1]).strip()
     return (text or fallback)[:NAME_MAX]
 
 
@@ -48,11 +51,12 @@ class DatasetService:
         max_decompressed_bytes: int = IngestLimits.max_decompressed_bytes,
     ) -> Dataset:
         """Parse and validate the whole file first; store it only if it is usable."""
+        given = _dataset_name(name, filename, "")  # a bad name fails before the file is read
         limits = IngestLimits(max_bytes=max_bytes, max_decompressed_bytes=max_decompressed_bytes)
         parsed = ingest(source, units=units, limits=limits)
         with self.db.write() as s:
             return DatasetRepo(s).add(
-                name=_clean_name(name or filename, f"{parsed.source} upload"),
+                name=given or f"{parsed.source} upload",
                 source=parsed.source,
                 rows=parsed.rows,
                 rate_hz=parsed.rate_hz,
@@ -70,15 +74,16 @@ class DatasetService:
                 f"unknown scenario {scenario!r}; choose one of {sorted(scenarios())}",
                 field="scenario",
             )
+        given = _dataset_name(name, None, f"{scenario} (seed {seed})")
         try:
             data = get_scenario(scenario).build(seed=seed, duration_s=duration_s)
-        except ConfigError as exc:
+        except EstimationError as exc:  # out of range, or too short for two samples
             raise InvalidRequestError(str(exc), field="duration_s") from exc
         signals = data.signals
         rate = float(1.0 / np.median(np.diff(signals.time))) if len(signals) > 1 else 0.0
         with self.db.write() as s:
             return DatasetRepo(s).add(
-                name=_clean_name(name, f"{scenario} (seed {seed})"),
+                name=given,
                 source=f"scenario:{scenario}",
                 rows=len(signals),
                 rate_hz=rate,

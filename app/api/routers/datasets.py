@@ -10,8 +10,11 @@ from fastapi import APIRouter, File, Form, Query, Response, UploadFile
 from app.api.deps import MAX_ID, Id, ServicesDep
 from app.api.schemas import ERRORS, DatasetOut, PageOut, PreviewChannel, PreviewOut, SimulateIn
 from app.errors import InvalidRequestError
+from app.io.names import name_schema
 
 router = APIRouter(prefix="/datasets", tags=["datasets"], responses=ERRORS)
+# ``{dataset_id:int}``: only digits match, so ``GET /datasets/simulate`` reaches the POST-only
+# route of that path (405, Allow: POST) instead of failing as an id (422).
 
 Limit = Annotated[int, Query(ge=1, le=500)]
 Offset = Annotated[int, Query(ge=0, le=MAX_ID)]
@@ -37,7 +40,7 @@ def _units(raw: str | None) -> dict[str, str] | None:
 def upload_dataset(
     services: ServicesDep,
     file: Annotated[UploadFile, File(description="CSV, MCAP or MDF4 log (format from content).")],
-    name: Annotated[str | None, Form(max_length=200)] = None,
+    name: Annotated[str | None, Form(max_length=200, json_schema_extra=name_schema)] = None,
     units: Annotated[str | None, Form(description='JSON object {"channel": "unit"}')] = None,
 ) -> DatasetOut:
     """Upload a log. The whole file is validated before anything is stored."""
@@ -72,12 +75,12 @@ def list_datasets(services: ServicesDep, limit: Limit = 50, offset: Offset = 0) 
     )
 
 
-@router.get("/{dataset_id}", response_model=DatasetOut)
+@router.get("/{dataset_id:int}", response_model=DatasetOut)
 def get_dataset(services: ServicesDep, dataset_id: Id) -> DatasetOut:
     return DatasetOut.of(services.datasets.get(dataset_id))
 
 
-@router.get("/{dataset_id}/preview", response_model=PreviewOut)
+@router.get("/{dataset_id:int}/preview", response_model=PreviewOut)
 def preview_dataset(
     services: ServicesDep,
     dataset_id: Id,
@@ -91,7 +94,7 @@ def preview_dataset(
     )
 
 
-@router.delete("/{dataset_id}", status_code=204, response_class=Response)
+@router.delete("/{dataset_id:int}", status_code=204, response_class=Response)
 def delete_dataset(services: ServicesDep, dataset_id: Id, force: bool = False) -> Response:
     """Delete a dataset; 409 if runs use it, unless ``force`` (then they go too)."""
     services.datasets.delete(dataset_id, force=force)

@@ -159,6 +159,12 @@ def export_run(
 ) -> Response:
     """Download: ``json`` (the ``mapwise adapt`` map document), ``csv`` (map grid, or
     ``part=series`` the time series), ``mcap`` (series + map versions), ``dcm``."""
+    if part == "series" and format in ("json", "dcm"):
+        raise InvalidRequestError(
+            f"part=series is exported as CSV (format=csv) or MCAP; format={format} exports the "
+            "map only",
+            field="part",
+        )
     download = services.runs.export(run_id, fmt=format, version_id=version, part=part)
     return Response(
         download.content,
@@ -167,17 +173,37 @@ def export_run(
     )
 
 
+# One run id, 1..2**31-1 (MAX_ID) spelled in plain digits, as a regular expression, so that
+# the schema states exactly what ``runs`` accepts.
+_RUN_ID = (
+    r"(?:[1-9][0-9]{0,8}|1[0-9]{9}|20[0-9]{8}|21[0-3][0-9]{7}|214[0-6][0-9]{6}|2147[0-3][0-9]{5}"
+    r"|21474[0-7][0-9]{4}|214748[0-2][0-9]{3}|2147483[0-5][0-9]{2}|21474836[0-3][0-9]"
+    r"|214748364[0-7])"
+)
+MAX_COMPARE = 20
+RUN_IDS = re.compile(rf"^{_RUN_ID}(?:,{_RUN_ID}){{0,{MAX_COMPARE - 1}}}$")
+
+
 @router.get("/compare", response_model=CompareOut)
-def compare_runs(services: ServicesDep, runs: Annotated[str, Query(max_length=2000)]) -> CompareOut:
+def compare_runs(
+    services: ServicesDep,
+    runs: Annotated[
+        str,
+        Query(
+            max_length=2000,
+            description=f"1 to {MAX_COMPARE} comma-separated run ids, e.g. ``3,5``.",
+            json_schema_extra={"pattern": RUN_IDS.pattern},
+        ),
+    ],
+) -> CompareOut:
     """Several runs side by side, each with its final (or latest) map version."""
-    try:
-        ids = [int(x) for x in runs.split(",") if x.strip()]
-    except ValueError:
-        raise InvalidRequestError("runs must be comma-separated run ids", field="runs") from None
-    if not all(1 <= i <= MAX_ID for i in ids):
-        raise InvalidRequestError(f"run ids are 1..{MAX_ID}", field="runs")
-    if len(ids) > 20:
-        raise InvalidRequestError("compare at most 20 runs", field="runs")
+    if RUN_IDS.fullmatch(runs) is None:
+        raise InvalidRequestError(
+            f"runs must be 1 to {MAX_COMPARE} comma-separated run ids (1..{MAX_ID}) such as "
+            f"'3,5'; got {runs[:80]!r}",
+            field="runs",
+        )
+    ids = [int(x) for x in runs.split(",")]
     items = []
     for run, version in services.runs.compare(ids):
         doc = RunOut.of(run).model_dump()

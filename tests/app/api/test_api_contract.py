@@ -68,6 +68,87 @@ def test_upload_name_and_units_fields(client: TestClient) -> None:
     assert response.json()["name"] == "My log"
 
 
+@pytest.mark.parametrize("name", ["run 3/4 \\ cold", "..\\..\\x", "été 🚗", "שם/2"])
+def test_dataset_names_are_kept_as_given(client: TestClient, name: str) -> None:
+    """A name is a label, never a path: ``/`` and ``\\`` stay (only the client's file name
+    is cut to its last component), for uploads and simulations alike."""
+    text = b"time,a\n0,1\n1,2\n"
+    response = client.post(
+        "/api/datasets", files={"file": ("x.csv", text)}, data={"name": f" {name} "}
+    )
+    assert response.status_code == 201, response.text
+    assert response.json()["name"] == name
+    response = client.post(
+        "/api/datasets/simulate", json={"scenario": "skf-sim1", "name": name, "duration_s": 5}
+    )
+    assert response.status_code == 201, response.text
+    assert client.get(f"/api/datasets/{response.json()['id']}").json()["name"] == name
+
+
+@pytest.mark.parametrize(
+    ("name", "code_point"),
+    [("a\u202eb", "U+202E"), ("\u200bx", "U+200B"), ("x\ufeff", "U+FEFF"), ("a\x9bb", "U+009B")],
+)
+def test_control_characters_in_names_are_refused_alike(
+    client: TestClient, name: str, code_point: str
+) -> None:
+    """The one rule for dataset names and channel names: 422 naming the field and the code
+    point, nothing stored."""
+    before = client.get("/api/datasets").json()["total"]
+    text = b"time,a\n0,1\n1,2\n"
+    for response, field in (
+        (
+            client.post("/api/datasets", files={"file": ("x.csv", text)}, data={"name": name}),
+            "name",
+        ),
+        (
+            client.post("/api/datasets/simulate", json={"scenario": "skf-sim1", "name": name}),
+            "name",
+        ),
+        (
+            client.post(
+                "/api/datasets", files={"file": ("x.csv", f"time,{name}\n0,1\n1,2\n".encode())}
+            ),
+            "header",
+        ),
+    ):
+        assert response.status_code == 422, response.text
+        error = response.json()["error"]
+        assert error["field"] == field
+        assert code_point in error["message"]
+    assert client.get("/api/datasets").json()["total"] == before
+
+
+@pytest.mark.parametrize(
+    ("method", "path", "allow"),
+    [
+        ("OPTIONS", "/api/datasets", "GET, POST"),
+        ("OPTIONS", "/api/datasets/1", "GET, DELETE"),
+        ("PUT", "/api/datasets/1", "GET, DELETE"),
+        ("GET", "/api/datasets/simulate", "POST"),
+        ("DELETE", "/api/datasets/simulate", "POST"),
+        ("OPTIONS", "/api/runs", "GET, POST"),
+        ("OPTIONS", "/api/runs/1/versions/2", "GET, PATCH"),
+        ("PUT", "/api/runs/1/cancel", "POST"),
+        ("OPTIONS", "/api/sweeps", "GET, POST"),
+        ("OPTIONS", "/api/batches", "GET, POST"),
+        ("OPTIONS", "/api/base-maps", "GET, POST"),
+        ("POST", "/api/health", "GET"),
+    ],
+)
+def test_405_lists_every_method_of_the_path(
+    client: TestClient, method: str, path: str, allow: str
+) -> None:
+    """Starlette's 405 named only the first route that matched the path (GET or DELETE of
+    ``/datasets/{id}``, never both); ``GET /datasets/simulate`` was parsed as an id (422)."""
+    response = client.request(method, path)
+    assert response.status_code == 405, response.text
+    assert response.headers["allow"] == allow
+    error = response.json()["error"]
+    assert error["code"] == "method_not_allowed"
+    assert f"allowed: {allow}" in error["message"]
+
+
 @pytest.mark.parametrize("estimator", ["kf", "skf", "sskf", "rls", "nlms"])
 def test_export_json_equals_mapwise_adapt(
     client: TestClient,

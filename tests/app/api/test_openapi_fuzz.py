@@ -1,31 +1,29 @@
-"""Schemathesis fuzzes every operation of the OpenAPI document against a real server:
-no request may produce a 5xx, and status codes, content types and bodies must match what the
-document declares. SQLite and PostgreSQL."""
+"""Schemathesis with ``--checks all`` against a real server, SQLite and PostgreSQL: every
+phase (examples, coverage, fuzzing, stateful), every check — no 5xx, status codes, content
+types, headers and bodies as documented, schema-valid requests accepted and invalid ones
+refused, ``Allow`` headers, undeclared methods, use after delete — must find 0 failures.
+
+The few operations whose content the schema cannot describe (an uploaded file, a run's
+signals against its dataset) are listed in ``schemathesis.toml`` beside this file, with why.
+"""
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
-import schemathesis
-from hypothesis import HealthCheck, given, settings
-from schemathesis.checks import not_a_server_error
-from schemathesis.specs.openapi.checks import (
-    content_type_conformance,
-    response_schema_conformance,
-    status_code_conformance,
-)
 
 from tests.support.server import Server
 
-pytestmark = pytest.mark.slow  # hypothesis drives every operation of a real server
+pytestmark = pytest.mark.slow  # a real server and about 2,000 generated requests
 
-CHECKS = (
-    not_a_server_error,
-    status_code_conformance,
-    content_type_conformance,
-    response_schema_conformance,
-)
+CONFIG = Path(__file__).with_name("schemathesis.toml")
+MAX_EXAMPLES = 30  # per operation and phase: about 2,000 requests, under a minute
+SEED = 1
 
 
 @pytest.fixture(scope="module")
@@ -35,27 +33,37 @@ def fuzz_server(backend: str, fresh_url) -> Iterator[Server]:  # type: ignore[no
     server.stop()
 
 
-def test_no_server_errors_and_documented_responses(fuzz_server: Server) -> None:
-    schema = schemathesis.openapi.from_url(f"{fuzz_server.base}/openapi.json")
-    failures: list[str] = []
-    operations = [result.ok() for result in schema.get_all_operations()]
-    assert len(operations) >= 20
-    for operation in operations:
+def test_schemathesis_checks_all_finds_nothing(fuzz_server: Server, tmp_path: Path) -> None:
+    report = tmp_path / "report.ndjson"
+    done = subprocess.run(
+        [
+            sys.executable, "-m", "schemathesis.cli",
+            "--config-file", str(CONFIG),
+            "run", f"{fuzz_server.base}/openapi.json",
+            "--checks", "all",
+            "--max-examples", str(MAX_EXAMPLES),
+            "--seed", str(SEED),
+            "--workers", "1",
+            "--request-timeout", "60",
+            "--report", "ndjson", "--report-ndjson-path", str(report),
+            "--no-color",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )  # fmt: skip
+    summary = done.stdout[-6000:]
+    assert done.returncode == 0, summary + done.stderr[-2000:] + fuzz_server.output()
+    # the run really exercised the API: every operation, many requests
+    events = [json.loads(line) for line in report.read_text().splitlines() if line.strip()]
+    assert len(events) > 100, summary
+    tested = _operations_tested(done.stdout)
+    assert tested >= 25, summary
 
-        @given(case=operation.as_strategy())
-        @settings(
-            max_examples=40,
-            deadline=None,
-            suppress_health_check=list(HealthCheck),
-            derandomize=True,
-            database=None,
-        )
-        def fuzz(case) -> None:  # type: ignore[no-untyped-def]
-            response = case.call(base_url=fuzz_server.base, timeout=60)
-            case.validate_response(response, checks=CHECKS)
 
-        try:
-            fuzz()
-        except Exception as exc:
-            failures.append(f"{operation.method.upper()} {operation.path}: {exc}"[:1500])
-    assert not failures, "\n\n".join(failures)
+def _operations_tested(output: str) -> int:
+    """``Tested: 31`` in the summary's "API Operations" block."""
+    for line in output.splitlines():
+        if line.strip().startswith("Tested:"):
+            return int(line.split(":")[1].split()[0])
+    return 0

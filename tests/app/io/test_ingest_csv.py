@@ -137,6 +137,100 @@ BAD_FILES = [
     ("binary garbage", bytes(range(256)) * 8, "unsupported_format", "file", "binary data"),
     ("NUL inside text", b"time,x\n0,1\n1,\x002\n", "unsupported_format", "file", "binary data"),
     ("missing time column", b"x,y\n1,2\n3,4\n", "validation_error", "stamp", "time column 'stamp'"),
+    # float() reads these as numbers; a log's cells are plain ASCII numbers only.
+    (
+        "digit separator",
+        b"time,x\n0,1\n1,1_000\n",
+        "validation_error",
+        "x",
+        "line 3, column 'x': '1_000' is not a plain number",
+    ),
+    (
+        "Arabic-Indic digits",
+        "time,x\n0,1\n1,\u0661\u0662\n".encode(),
+        "validation_error",
+        "x",
+        "line 3, column 'x': '\u0661\u0662' is not a plain number",
+    ),
+    (
+        "fullwidth digits",
+        "time,x\n0,\uff11\n1,2\n".encode(),
+        "validation_error",
+        "x",
+        "line 2, column 'x': '\uff11' is not a plain number",
+    ),
+    (
+        "Devanagari digits in time",
+        "time,x\n0,1\n\u0967,2\n".encode(),
+        "validation_error",
+        "time",
+        "line 3, column 'time'",
+    ),
+    (
+        "non-ASCII space",
+        "time,x\n0,1\n1,\u00a02\n".encode(),
+        "validation_error",
+        "x",
+        "line 3, column 'x'",
+    ),
+    (
+        "digit separator after a chunk of good rows",
+        ("time,x\n" + "".join(f"{k},{k}\n" for k in range(50)) + "50,2_5\n").encode(),
+        "validation_error",
+        "x",
+        "line 52, column 'x': '2_5'",
+    ),
+    # one delimiter throughout, else the error says so and names the row
+    (
+        "mixed delimiters in every row",
+        b"time,a;b\n0,1;2\n1,2;3\n",
+        "validation_error",
+        "header",
+        "line 1: the delimiter is inconsistent: column 'time,a' contains ','",
+    ),
+    (
+        "a row with another delimiter",
+        b"time;a;b\n0;1;2\n1;2;3\n2,3,4\n",
+        "validation_error",
+        "file",
+        "line 4: the delimiter is inconsistent: this row is separated by ','",
+    ),
+    (
+        "rows with another delimiter than the header",
+        b"time,a,b\n0;1;2\n1;2;3\n",
+        "validation_error",
+        "file",
+        "line 2: the delimiter is inconsistent: this row is separated by ';'",
+    ),
+    (
+        "a late row with another delimiter",
+        (b"time;a\n" + b"".join(b"%d;%d\n" % (k, k) for k in range(40)) + b"40,1\n"),
+        "validation_error",
+        "file",
+        "line 42: the delimiter is inconsistent",
+    ),
+    # names: control and format characters refused, naming the code point
+    (
+        "bidi override in a column name",
+        "time,a\u202eb\n0,1\n1,2\n".encode(),
+        "validation_error",
+        "header",
+        "U+202E (RIGHT-TO-LEFT OVERRIDE) at position 1",
+    ),
+    (
+        "zero-width space in a column name",
+        "time,\u200bx\n0,1\n1,2\n".encode(),
+        "validation_error",
+        "header",
+        "U+200B (ZERO WIDTH SPACE) at position 0",
+    ),
+    (
+        "C1 control in a column name",
+        "time,x\u0085y\n0,1\n1,2\n".encode(),
+        "validation_error",
+        "header",
+        "U+0085 at position 1",
+    ),
 ]
 
 
@@ -235,3 +329,29 @@ def test_logs_longer_than_a_chunk_keep_line_numbers_and_column_rules() -> None:
         ingest(text.encode())
     assert info.value.field == "b"
     assert f"line {bad + 3}, column 'b': non-numeric value 'oops'" in info.value.message
+
+
+def test_plain_number_spellings_and_names_kept_as_given() -> None:
+    """What the strict syntax still takes, and names that are text however odd: kept."""
+    content = (
+        "time,p/q [bar],C:\\x,\u00e9t\u00e9 \U0001f697,\u05e9\u05dd\n"
+        " 0 ,1.,+.5e-3,-2E+2,7\n"
+        "1,2,3,4,8\n"
+    ).encode()
+    ds = ingest(content)
+    assert ds.signals.names == ["p/q", "C:\\x", "\u00e9t\u00e9 \U0001f697", "\u05e9\u05dd"]
+    assert ds.signals.units["p/q"] == "bar"
+    np.testing.assert_array_equal(ds.signals["p/q"], [1.0, 2.0])
+    np.testing.assert_array_equal(ds.signals["C:\\x"], [5e-4, 3.0])
+    np.testing.assert_array_equal(ds.signals["\u00e9t\u00e9 \U0001f697"], [-200.0, 4.0])
+
+
+def test_adapt_drops_a_column_that_is_not_plain_numbers() -> None:
+    """``mapwise adapt`` keeps only numeric columns: ``1_000`` makes a column non-numeric
+    there too, instead of silently 1000."""
+    from app.io.csv_files import parse_csv
+
+    log = parse_csv("time,a,b\n0,1,1_000\n1,2,2\n")
+    assert log.signals.names == ["a"]
+    with pytest.raises(InputError, match="'1_000' is not a plain number"):
+        parse_csv("time,a,b\n0,1,1_000\n1,2,2\n", columns=["b"])

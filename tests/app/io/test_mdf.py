@@ -5,6 +5,9 @@ from __future__ import annotations
 
 import io
 import struct
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,8 +18,9 @@ from app.io.ingest import IngestLimits, ingest
 
 pytestmark = [
     pytest.mark.filterwarnings("ignore::DeprecationWarning"),
-    # asammdf's MDF4.__del__ trips over the half-built object of a file it refused.
-    pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning"),
+    # asammdf's MDF4.__del__ trips over the half-built object of a file it refused; the
+    # reader silences exactly that, so any unraisable exception left is a failure.
+    pytest.mark.filterwarnings("error::pytest.PytestUnraisableExceptionWarning"),
 ]
 
 
@@ -105,13 +109,19 @@ def bad_mdfs() -> list:
     nan = RPM.copy()
     nan[17] = np.nan
     return [
-        ("truncated", good[: len(good) // 2], "validation_error", "file", "unreadable MDF"),
+        (
+            "truncated",
+            good[: len(good) // 2],
+            "validation_error",
+            "file",
+            "the MDF file is truncated or corrupt (a block ends beyond the end of the",
+        ),
         (
             "magic then garbage",
             b"MDF     4.10    " + bytes(200),
             "validation_error",
             "file",
-            "unreadable MDF",
+            "the MDF file is truncated or corrupt (its identification or header block is not",
         ),
         (
             "unknown version",
@@ -161,3 +171,55 @@ def test_bad_mdf_corpus(data: bytes, code: str, field: str, message: str) -> Non
     err = info.value
     assert (err.code, err.field) == (code, field), str(err)
     assert message in err.message
+
+
+@pytest.mark.parametrize("version", ["4.10", "3.30"])
+def test_truncated_or_corrupted_files_get_one_clear_message(version: str, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """Cut a real file at every kind of place, or overwrite a stretch of it: always the same
+    sentence, never asammdf's internals (a ``BytesIO`` repr, ``struct``'s buffer sizes)."""
+    mdf = MDF(version=version)
+    mdf.append([Signal(RPM, TIME, name="rpm", unit="1/min"), Signal(LOAD, TIME, name="load")])
+    path = tmp_path / ("log.mf4" if version.startswith("4") else "log.mdf")
+    mdf.save(path)
+    mdf.close()
+    good = path.read_bytes()
+    cuts = [good[:n] for n in (16, 64, 65, 100, 300, len(good) // 3, len(good) // 2, len(good) - 8)]
+    damaged = bytearray(good)
+    damaged[64:200] = b"\xff" * 136
+    for data in [*cuts, bytes(damaged)]:
+        with pytest.raises(InputError) as info:
+            ingest(data)
+        message = info.value.message
+        assert message.startswith("the MDF file is truncated or corrupt ("), message
+        assert "BytesIO" not in message, message
+        assert "unpack requires" not in message, message
+        assert (info.value.field, info.value.status) == ("file", 422)
+
+
+def test_refused_files_leave_no_traceback_on_stderr(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """The server's log is its stderr: asammdf's ``__del__`` of a half-read file printed
+    ``Exception ignored in: <function MDF4.__del__>`` and a traceback there."""
+    good = mdf_bytes([[Signal(RPM, TIME, name="rpm")]])
+    (tmp_path / "cut.mf4").write_bytes(good[: len(good) // 2])
+    (tmp_path / "head.mf4").write_bytes(good[:100])
+    script = (
+        "import gc, sys\n"
+        "from app.io.ingest import ingest\n"
+        "for path in sys.argv[1:]:\n"
+        "    try:\n"
+        "        ingest(open(path, 'rb').read())\n"
+        "    except ValueError as exc:\n"
+        "        print(exc)\n"
+        "gc.collect()\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script, str(tmp_path / "cut.mf4"), str(tmp_path / "head.mf4")],
+        cwd=Path(__file__).resolve().parents[3],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=True,
+    )
+    assert done.stdout.count("the MDF file is truncated or corrupt") == 2, done.stdout
+    assert "Traceback" not in done.stderr, done.stderr
+    assert "Exception ignored" not in done.stderr, done.stderr
