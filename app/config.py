@@ -133,6 +133,12 @@ class Settings(BaseSettings):
         gt=0,
         description="Most bytes of stored map versions one run may write, in MiB.",
     )
+    sweep_versions_mb: float = Field(
+        8192.0,
+        gt=0,
+        description="Most bytes of stored map versions the runs of one sweep or batch may "
+        "write in all (their predicted sum), in MiB.",
+    )
 
     allowed_hosts: Annotated[list[str] | None, NoDecode] = Field(
         None,

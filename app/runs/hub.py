@@ -5,7 +5,9 @@ queue it writes without blocking) and the hub never waits for a viewer: each vie
 small bounded queue; when it is full the viewer's pending deltas are dropped and it is marked
 for a fresh ``full`` frame, which it gets as soon as it reads again. The hub keeps the current
 state of every executing run (map, variances, visits, trajectory and series so far, bounded
-by halving their resolution) so late joiners start from a full frame.
+by halving their resolution) so late joiners start from a full frame. A tick without the map
+(``values`` is ``None``: the worker sends the map only within its cells-per-second budget)
+leaves the last map in place.
 
 Viewers are admitted within limits (per run, per client address, in all): past one,
 :meth:`LiveHub.subscribe` raises :class:`ViewerLimitError` saying which. A viewer's memory is
@@ -271,7 +273,8 @@ class LiveHub:
         gap = state.seq and tick.seq != state.seq + 1
         state.seq = tick.seq
         state.sample, state.n_samples, state.progress = tick.sample, tick.n_samples, tick.progress
-        state.values, state.variances, state.visits = tick.values, tick.variances, tick.visits
+        if tick.values is not None:  # a tick without the map (its byte budget) keeps the last
+            state.values, state.variances, state.visits = tick.values, tick.variances, tick.visits
         state.active_cell, state.metrics = tick.active_cell, tick.metrics
         state.rejected = tick.rejected
         state.add_points(tick.trajectory, tick.series)

@@ -2,6 +2,10 @@
 
 Publishing never waits: a tick that is not due yet is skipped (its samples go into the next
 one), and ``publish`` itself drops a message rather than block (a full queue).
+
+The map (values, variances, visits) is what makes a tick big: it rides on a tick only while
+``cells × map-bearing ticks a second ≤ LIVE_CELLS_PER_S``; other ticks carry ``None`` there
+(the hub and the dashboard keep the last map). The final tick always carries it.
 """
 
 from __future__ import annotations
@@ -20,14 +24,27 @@ from estimation.estimator import Snapshot
 
 Publish = Callable[[dict[str, Any]], None]
 LIVE_POINTS_PER_TICK = 100
+# Map cells sent per second per run, at most (each of values, variances and visits): a
+# 250 000-cell map goes out every 1.25 s, a 20 × 20 map on every tick.
+LIVE_CELLS_PER_S = 200_000
 
 
 class LiveTicks:
     """The live side of one run: what was shown (``sample``) and when the next tick is due."""
 
-    def __init__(self, run_id: int, live_fps: float, publish: Publish) -> None:
+    def __init__(
+        self,
+        run_id: int,
+        live_fps: float,
+        publish: Publish,
+        *,
+        cells_per_s: float = LIVE_CELLS_PER_S,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
         self.run_id, self.live_fps, self.publish = run_id, live_fps, publish
+        self.cells_per_s, self.clock = cells_per_s, clock
         self.next_tick = 0.0  # monotonic time the next tick is allowed at
+        self.next_map = 0.0  # monotonic time the next tick may carry the map at
         self.sample = 0  # first sample not yet shown
         self.seq = 0
 
@@ -57,8 +74,9 @@ class LiveTicks:
         force: bool = False,
         metrics: dict[str, Any] | None = None,
     ) -> None:
-        """The samples since the last tick, the map, the metrics: if due (or ``force``)."""
-        now = time.monotonic()
+        """The samples since the last tick, the metrics and, when its budget allows (or on
+        ``force``), the map: if due (or ``force``)."""
+        now = self.clock()
         if not force and (now < self.next_tick or snap.sample <= self.sample):
             return
         self.next_tick = now + 1.0 / self.live_fps  # never more than live_fps a second
@@ -83,9 +101,14 @@ class LiveTicks:
         rmse = results.live_rmse()
         if rmse is not None:
             live_metrics.setdefault("output_rmse", rmse)
-        variances = None
-        if table is not None and snap.variance is not None:
-            variances = np.asarray(snap.variance).reshape(table.shape)
+        with_map = table is not None and (force or now >= self.next_map)
+        values = variances = visits = None
+        if with_map:
+            assert table is not None
+            self.next_map = now + table.size / self.cells_per_s
+            values, visits = nested_or_none(table.values), nested_or_none(results.visits)
+            if snap.variance is not None:
+                variances = nested_or_none(np.asarray(snap.variance).reshape(table.shape))
         message = TickMessage(
             run_id=self.run_id,
             seq=self.seq,
@@ -94,9 +117,9 @@ class LiveTicks:
             progress=z / results.n,
             time_s=snap.time_s,
             emitted_at=time.time(),  # wall clock (s since epoch), for frame-delay figures
-            values=None if table is None else nested_or_none(table.values),
-            variances=nested_or_none(variances),
-            visits=nested_or_none(results.visits),
+            values=values,
+            variances=variances,
+            visits=visits,
             active_cell=active,
             trajectory=trajectory,
             series=series,

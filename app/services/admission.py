@@ -3,8 +3,10 @@
 Every run — alone, in a sweep or in a batch — and every base-map import is checked against
 the service's limits (:class:`Limits`, from ``MAPWISE_RUN_MEMORY_MB``, ``MAPWISE_MAX_CELLS``,
 ``MAPWISE_RUN_VERSIONS_MB`` and ``MAPWISE_RUN_MAX_S``) with the estimator's declared cost
-(:class:`estimation.registry.Cost`). A refusal is a 422 ``over_budget`` naming the field to
-change, the limit and the predicted figure ("predicted 7.3 TiB > 2.9 GiB run budget").
+(:class:`estimation.registry.Cost`); a sweep's or batch's runs together, against
+``MAPWISE_SWEEP_VERSIONS_MB`` (:class:`GroupBudget`). A refusal is a 422 ``over_budget``
+naming the field to change, the limit and the predicted figure ("predicted 7.3 TiB > 2.9 GiB
+run budget").
 
 The predicted memory of a run is::
 
@@ -46,6 +48,7 @@ class Limits:
     max_cells: int
     versions_bytes: int
     run_max_s: float
+    group_versions_bytes: int = 8192 * 2**20  # a sweep's or batch's runs in all
 
     @classmethod
     def from_settings(cls, settings: Settings) -> Limits:
@@ -54,6 +57,7 @@ class Limits:
             max_cells=settings.max_cells,
             versions_bytes=int(settings.run_versions_mb * 2**20),
             run_max_s=settings.run_max_s,
+            group_versions_bytes=int(settings.sweep_versions_mb * 2**20),
         )
 
 
@@ -172,3 +176,36 @@ def admit_run(
             )
         duration = max(duration, paced_s)
     return Prediction(memory_bytes=memory, versions_bytes=stored, duration_s=duration)
+
+
+class GroupBudget:
+    """The map versions a sweep's or batch's runs may store in all: each member's predicted
+    bytes are added as it is planned, and :meth:`check` refuses the sum over
+    ``limits.group_versions_bytes`` (a sweep of 2000 runs each within its own 512 MiB could
+    otherwise store 1000 GiB)."""
+
+    def __init__(self, limits: Limits, *, what: str, field: str) -> None:
+        self.limit, self.what, self.field = limits.group_versions_bytes, what, field
+        self.runs = 0
+        self.costed = 0  # members with a prediction (that store versions)
+        self.total = 0
+
+    def add(self, prediction: Prediction | None) -> None:
+        self.runs += 1
+        if prediction is not None:
+            self.costed += 1
+            self.total += prediction.versions_bytes
+
+    def check(self) -> None:
+        """:class:`OverBudgetError` naming the predicted sum, the budget and how many such
+        runs fit."""
+        if self.total <= self.limit:
+            return
+        fits = int(self.limit // max(self.total / max(self.costed, 1), 1))
+        raise OverBudgetError(
+            f"the {self.what}'s {self.runs:,} runs would store {human_bytes(self.total)} of map "
+            f"versions in all (predicted) > {human_bytes(self.limit)} {self.what} budget "
+            f"(MAPWISE_SWEEP_VERSIONS_MB); {fits:,} such runs fit, or version less often "
+            "(config.version_every)",
+            field=self.field,
+        )

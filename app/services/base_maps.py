@@ -8,7 +8,10 @@ from app.db.engine import Database
 from app.db.repositories import BaseMapRepo, RunRepo, VersionRepo
 from app.domain import BaseMap, Page
 from app.errors import ConflictError, InvalidRequestError
+from app.io.names import check_name, without_refused
 from app.services.admission import OverBudgetError
+
+NAME_MAX = 200
 
 
 class BaseMapService:
@@ -23,7 +26,7 @@ class BaseMapService:
             if version.values is None or version.axes is None:
                 raise ConflictError(f"run {run_id} ({run.estimator}) has no map", field="run_id")
             return BaseMapRepo(s).add(
-                name=_name(name),
+                name=_name(name, None),
                 source="run",
                 axes=version.axes,
                 values=version.values,
@@ -39,6 +42,7 @@ class BaseMapService:
     def import_file(self, data: bytes, *, name: str | None, filename: str | None) -> BaseMap:
         from app.io.export import import_map
 
+        given = _name(name, filename, "imported map")  # a bad name fails before the file is read
         table = import_map(data, name=None)
         if self.max_cells is not None and table.size > self.max_cells:
             raise OverBudgetError(
@@ -48,7 +52,7 @@ class BaseMapService:
             )
         with self.db.write() as s:
             return BaseMapRepo(s).add(
-                name=_name(name or filename or "imported map"),
+                name=given,
                 source="file",
                 axes=[a.to_dict() for a in table.axes],
                 values=table.values,
@@ -63,9 +67,13 @@ class BaseMapService:
             return BaseMapRepo(s).list(limit=limit, offset=offset)
 
 
-def _name(text: str) -> str:
-    clean = "".join(ch for ch in text.replace("\\", "/").rsplit("/", 1)[-1] if ch.isprintable())
-    clean = clean.strip()
-    if not clean:
+def _name(name: str | None, filename: str | None, fallback: str = "") -> str:
+    """The name as given, as a dataset's (:func:`check_name`: ``/`` kept, 422 naming ``name``
+    for a control or format character); without one, the last component of the client's file
+    name with such characters dropped (it was not typed as a name), else ``fallback``."""
+    if name is not None and name.strip():
+        return check_name(name, field="name", what="base map name")[:NAME_MAX]
+    text = without_refused((filename or "").replace("\\", "/").rsplit("/", 1)[-1]).strip()
+    if not (text or fallback):
         raise InvalidRequestError("a base map needs a name", field="name")
-    return clean[:200]
+    return (text or fallback)[:NAME_MAX]

@@ -20,6 +20,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from app.domain import BaseMap, Dataset
 from app.errors import InvalidRequestError, field_of
 from app.io.columns import same_unit
+from app.io.names import check_name, name_schema
 from app.runs.options import run_options
 from app.services.admission import Limits, Prediction, admit_run, check_cells
 from app.services.catalog import TABLE_ROLE, EstimatorName, kind_of, needs_table, roles
@@ -60,7 +61,7 @@ class RunRequest(BaseModel):
     table: TableSpec | None = None
     config: dict[str, Any] = Field(default_factory=dict)
     base_map_id: int | None = Field(None, ge=1, le=2**31 - 1)
-    name: str | None = Field(None, max_length=200)
+    name: str | None = Field(None, max_length=200, json_schema_extra=name_schema)
 
 
 @dataclass(frozen=True, slots=True)
@@ -74,6 +75,14 @@ class RunPlan:
     n_samples: int
     name: str
     prediction: Prediction | None = None
+
+
+def _run_name(name: str | None) -> str:
+    """The run's name as given (:func:`check_name`, as a dataset's: 422 naming ``name`` for a
+    control or format character), ``""`` for none."""
+    if name is None or not name.strip():
+        return ""
+    return check_name(name, field="name", what="run name")
 
 
 def _spec(name: str) -> EstimatorSpec:
@@ -298,7 +307,7 @@ def plan_run(
         config=config,
         produces_map=spec.produces_map,
         n_samples=dataset.rows,
-        name=request.name or f"{spec.name} on {dataset.name}",
+        name=_run_name(request.name) or f"{spec.name} on {dataset.name}",
         prediction=prediction,
     )
 

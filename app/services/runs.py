@@ -27,7 +27,7 @@ from app.io.decimate import stride_decimate
 from app.io.map_json import map_document
 from app.io.payload import unpack_signals
 from app.runs.frames import StatusFrame
-from app.services.admission import Limits
+from app.services.admission import GroupBudget, Limits
 from app.services.run_plan import RunRequest, plan_run
 from estimation.estimator import Snapshot
 from estimation.signals import Signals
@@ -96,8 +96,10 @@ class RunService:
         *,
         group_id: int | None = None,
         params: dict[str, Any] | None = None,
+        budget: GroupBudget | None = None,
     ) -> Run:
-        """Plan ``request`` and store it, queued, in the caller's transaction ``s``."""
+        """Plan ``request`` and store it, queued, in the caller's transaction ``s`` (its
+        predicted versions added to a group's ``budget``)."""
         dataset = DatasetRepo(s).get(request.dataset_id)
         base_map = None
         if request.base_map_id is not None:
@@ -109,6 +111,8 @@ class RunService:
             version_fraction=self.settings.version_fraction,
             limits=Limits.from_settings(self.settings),
         )
+        if budget is not None:
+            budget.add(plan.prediction)
         return RunRepo(s).add(
             dataset_id=dataset.id,
             name=plan.name,

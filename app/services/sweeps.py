@@ -25,7 +25,8 @@ from app.db.engine import Database
 from app.db.repositories import GroupRepo, RunRepo, VersionRepo
 from app.domain import Page, Run, RunGroup, RunStatus
 from app.errors import AppError, InvalidRequestError
-from app.services.admission import OverBudgetError
+from app.io.names import check_name, name_schema
+from app.services.admission import GroupBudget, Limits, OverBudgetError
 from app.services.catalog import EstimatorName
 from app.services.overrides import merge
 from app.services.run_plan import RunRequest, TableSpec
@@ -71,7 +72,7 @@ class SweepRequest(BaseModel):
     seed: int = Field(0, ge=0, le=2**31 - 1, description="Seed of the random sample.")
     metric: str = Field("output_rmse", min_length=1, max_length=100)
     order: Literal["min", "max"] = "min"
-    name: str | None = Field(None, max_length=200)
+    name: str | None = Field(None, max_length=200, json_schema_extra=name_schema)
 
 
 class BatchRequest(BaseModel):
@@ -86,7 +87,7 @@ class BatchRequest(BaseModel):
     signals: dict[str, str] = Field(default_factory=dict)
     table: TableSpec | None = None
     config: dict[str, Any] = Field(default_factory=dict)
-    name: str | None = Field(None, max_length=200)
+    name: str | None = Field(None, max_length=200, json_schema_extra=name_schema)
 
 
 def expand_parameters(
@@ -149,6 +150,14 @@ def _dotted(params: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+def _group_name(name: str | None) -> str:
+    """The group's name as given (:func:`check_name`: 422 naming ``name`` for a control or
+    format character), ``""`` for none."""
+    if name is None or not name.strip():
+        return ""
+    return check_name(name, field="name", what="group name")
+
+
 @dataclass(frozen=True, slots=True)
 class GroupView:
     group: RunGroup
@@ -160,23 +169,28 @@ class SweepService:
         self.db = db
         self.runs = runs
 
+    def _budget(self, what: str, field: str) -> GroupBudget:
+        return GroupBudget(Limits.from_settings(self.runs.settings), what=what, field=field)
+
     def create_sweep(self, request: SweepRequest) -> GroupView:
         self.runs.need_executor()
+        name = _group_name(request.name)
         points = expand_parameters(request.parameters, samples=request.samples, seed=request.seed)
         base = request.model_dump(mode="json", include={"dataset_id", "estimator", "signals"})
         table = None if request.table is None else request.table.model_dump(mode="json")
         with self.db.write() as s:
             group = GroupRepo(s).add(
                 kind="sweep",
-                name=(
-                    request.name or f"{request.estimator} sweep of {', '.join(request.parameters)}"
-                )[:200],
+                name=(name or f"{request.estimator} sweep of {', '.join(request.parameters)}")[
+                    :200
+                ],
                 estimator=request.estimator,
                 request=request.model_dump(mode="json"),
                 metric=request.metric,
                 order=request.order,
             )
             runs = []
+            budget = self._budget("sweep", "samples" if request.samples else "parameters")
             for i, params in enumerate(points):
                 label = ", ".join(f"{k}={_short(v)}" for k, v in params.items())
                 run_request = RunRequest(
@@ -185,22 +199,27 @@ class SweepService:
                     config=merge(request.config, _dotted(params)),
                     name=f"{group.name} #{i + 1}: {label}"[:200],
                 )
-                runs.append(self._store(s, run_request, group.id, params, parameters=True))
+                runs.append(
+                    self._store(s, run_request, group.id, params, parameters=True, budget=budget)
+                )
+            budget.check()  # the transaction stores nothing of a refused sweep
         for run in runs:
             self.runs.submit(run.id)
         return GroupView(group, runs)
 
     def create_batch(self, request: BatchRequest) -> GroupView:
         self.runs.need_executor()
+        name = _group_name(request.name)
         table = None if request.table is None else request.table.model_dump(mode="json")
         with self.db.write() as s:
             group = GroupRepo(s).add(
                 kind="batch",
-                name=request.name or f"{request.estimator} over {len(request.dataset_ids)} logs",
+                name=name or f"{request.estimator} over {len(request.dataset_ids)} logs",
                 estimator=request.estimator,
                 request=request.model_dump(mode="json"),
             )
             runs = []
+            budget = self._budget("batch", "dataset_ids")
             for i, dataset_id in enumerate(request.dataset_ids):
                 run_request = RunRequest(
                     dataset_id=dataset_id,
@@ -210,7 +229,8 @@ class SweepService:
                     config=request.config,
                     name=f"{group.name}: vehicle {i + 1} (dataset {dataset_id})"[:200],
                 )
-                runs.append(self._store(s, run_request, group.id, None, index=i))
+                runs.append(self._store(s, run_request, group.id, None, index=i, budget=budget))
+            budget.check()
         for run in runs:
             self.runs.submit(run.id)
         return GroupView(group, runs)
@@ -224,10 +244,11 @@ class SweepService:
         *,
         parameters: bool = False,
         index: int | None = None,
+        budget: GroupBudget | None = None,
     ) -> Run:
         """Plan and store one run of a group; its errors name the parameter or dataset."""
         try:
-            return self.runs.store_in(s, request, group_id=group_id, params=params)
+            return self.runs.store_in(s, request, group_id=group_id, params=params, budget=budget)
         except (AppError, EstimationError) as exc:
             message = getattr(exc, "message", str(exc))
             # an over-budget member keeps its code (over_budget), any other a validation error

@@ -3,6 +3,7 @@ budget a worker enforces."""
 
 from __future__ import annotations
 
+import json
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -15,15 +16,17 @@ from app.domain import Channel, Dataset
 from app.errors import InvalidRequestError
 from app.services.admission import (
     WORKER_BASE_BYTES,
+    GroupBudget,
     Limits,
     OverBudgetError,
+    Prediction,
     admit_run,
     human_bytes,
 )
 from app.services.run_plan import RunRequest, locked_cells, plan_run
 from estimation.registry import get_spec, names
 from tests.support.helpers import log_csv, service_settings, start_run, upload_ok, wait_run
-from tests.support.server import run_body
+from tests.support.server import TABLE, run_body
 
 LIMITS = Limits(
     run_memory_bytes=2 * 2**30, max_cells=250_000, versions_bytes=512 * 2**20, run_max_s=6 * 3600
@@ -186,3 +189,99 @@ def test_a_run_over_its_wall_clock_budget_fails_with_a_clear_error(tmp_path: Pat
         done = wait_run(client, run["id"])
     assert done["status"] == "failed"
     assert "wall-clock budget of 0.001 s (MAPWISE_RUN_MAX_S)" in done["error"]
+
+
+def test_a_group_budget_sums_its_members_versions() -> None:
+    limits = Limits(
+        run_memory_bytes=2**31, max_cells=250_000, versions_bytes=512 * 2**20, run_max_s=1e4,
+        group_versions_bytes=1000 * 2**20,
+    )  # fmt: skip
+    each = Prediction(memory_bytes=2**28, versions_bytes=300 * 2**20, duration_s=1.0)
+    budget = GroupBudget(limits, what="sweep", field="parameters")
+    for _ in range(3):
+        budget.add(each)
+    budget.check()  # 900 MiB ≤ 1000 MiB
+    budget.add(each)
+    budget.add(None)  # a member without a prediction (no map) adds nothing
+    with pytest.raises(OverBudgetError) as caught:
+        budget.check()
+    assert caught.value.field == "parameters"
+    assert caught.value.code == "over_budget"
+    assert "5 runs would store 1.2 GiB" in caught.value.message
+    assert "> 1000.0 MiB sweep budget (MAPWISE_SWEEP_VERSIONS_MB)" in caught.value.message
+    assert "3 such runs fit" in caught.value.message
+
+
+def test_sweeps_and_batches_over_the_total_version_budget_store_nothing(tmp_path: Path) -> None:
+    # every member alone is far inside MAPWISE_RUN_VERSIONS_MB; six of them exceed 0.2 MiB
+    url = f"sqlite:///{tmp_path / 'db.sqlite'}"
+    with TestClient(create_app(service_settings(url, sweep_versions_mb=0.2))) as client:
+        dataset = upload_ok(client, log_csv(3000))
+        one = run_body(dataset["id"], "skf")
+        sweep = {k: one[k] for k in ("dataset_id", "estimator", "signals", "table")} | {
+            "parameters": {"sigma_w": [0.001, 0.01, 0.1], "sigma_v": [0.05, 0.5]},
+        }
+        response = client.post("/api/sweeps", json=sweep)
+        assert response.status_code == 422, response.text
+        error = response.json()["error"]
+        assert error["code"] == "over_budget"
+        assert error["field"] == "parameters"
+        assert "6 runs would store" in error["message"]
+        assert "204.8 KiB sweep budget (MAPWISE_SWEEP_VERSIONS_MB)" in error["message"]
+        assert "2 such runs fit" in error["message"]
+
+        batch = {k: one[k] for k in ("estimator", "signals", "table")} | {
+            "dataset_ids": [dataset["id"]] * 6
+        }
+        response = client.post("/api/batches", json=batch)
+        assert response.status_code == 422, response.text
+        assert response.json()["error"]["field"] == "dataset_ids"
+        assert "batch budget" in response.json()["error"]["message"]
+
+        assert client.get("/api/sweeps").json()["items"] == []
+        assert client.get("/api/batches").json()["items"] == []
+        assert client.get("/api/runs").json()["items"] == []
+
+
+def test_names_follow_the_one_rule(tmp_path: Path) -> None:
+    """Run, group and base-map names are kept as given (``/`` too); a control or format
+    character is a 422 naming the field, as for dataset names."""
+    url = f"sqlite:///{tmp_path / 'db.sqlite'}"
+    with TestClient(create_app(service_settings(url))) as client:
+        dataset = upload_ok(client, log_csv(600))
+        body = run_body(dataset["id"], "skf")
+        for bad in ("evil\u202etxt.exe", "a\nb", "zero\u200bwidth"):
+            response = client.post("/api/runs", json=body | {"name": bad})
+            assert response.status_code == 422, response.text
+            assert response.json()["error"]["field"] == "name"
+            assert "U+" in response.json()["error"]["message"]
+            sweep = {k: body[k] for k in ("dataset_id", "estimator", "signals", "table")}
+            sweep |= {"parameters": {"sigma_v": [0.05]}, "name": bad}
+            response = client.post("/api/sweeps", json=sweep)
+            assert response.status_code == 422, response.text
+            assert response.json()["error"]["field"] == "name"
+            document = json.dumps({"axes": TABLE["axes"], "values": 1.0}).encode()
+            response = client.post(
+                "/api/base-maps", files={"file": ("m.json", document)}, data={"name": bad}
+            )
+            assert response.status_code == 422, response.text
+            assert response.json()["error"]["field"] == "name"
+        assert client.get("/api/runs").json()["items"] == []
+
+        run = start_run(client, body | {"name": "  bench/2024 run  "})
+        assert run["name"] == "bench/2024 run"
+        wait_run(client, run["id"])
+        values = [[1.0] * len(TABLE["axes"][1]["breakpoints"])] * len(
+            TABLE["axes"][0]["breakpoints"]
+        )
+        document = json.dumps({"axes": TABLE["axes"], "values": values}).encode()
+        response = client.post(
+            "/api/base-maps",
+            files={"file": ("dir/m.json", document)},
+            data={"name": "maps/engine A"},
+        )
+        assert response.status_code == 201, response.text
+        assert response.json()["name"] == "maps/engine A"
+        response = client.post("/api/base-maps", files={"file": ("dir\\sub/m.json", document)})
+        assert response.status_code == 201, response.text
+        assert response.json()["name"] == "m.json"  # a client's directories say nothing

@@ -20,6 +20,7 @@ import { api, clearErrors, estimators, scenarios } from "../../api.js";
 import { SEL } from "../../constants.js";
 import { card, h, icon, ICONS, pageHead } from "../../dom.js";
 import { encodeSignals } from "../../mapping.js";
+import { SCOPE } from "../../scopes.js";
 import { batchPicker, renderBatch } from "./batch-form.js";
 import { renderConfig, selectTab } from "./config-form.js";
 import { draftKeeper, takeDraft } from "./draft.js";
@@ -140,7 +141,7 @@ function buildForm(view) {
   hosts.tableSection.append(section(4, "Table grid", hosts.table, "sec-table"));
   view.submit = h(
     "button",
-    { type: "submit", class: "primary", "data-start": "" },
+    { type: "submit", class: "primary", "data-start": "", "data-needs": SCOPE.run },
     icon(ICONS.play),
     "Start run",
   );
