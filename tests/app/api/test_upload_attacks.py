@@ -1,6 +1,6 @@
 """Hostile uploads against a real ``mapwise serve`` (uvicorn), on SQLite and PostgreSQL: each
 gets a 400/413/415/422, nothing is stored, the server's memory grows by at most 64 MB over
-the whole corpus, and the event loop is never late by more than 100 ms (the server's own
+the whole corpus, and the event loop is never late by more than 250 ms (the server's own
 lag monitor, reported by /api/health) while health requests are answered throughout.
 
 The corpus: a lying ``Content-Length``, 10 000 multipart parts, a 10 MB text field, a
@@ -170,5 +170,7 @@ def test_hostile_uploads_are_refused_cheaply_and_store_nothing(server: Server) -
         statuses["1 GB streamed file"] = 413
     assert statuses == expected
     assert rss1 - rss0 <= 64, f"server memory grew {rss1 - rss0:.0f} MB"
-    assert loop_lag_ms <= 100, f"the event loop stalled {loop_lag_ms} ms"
+    # Parsing any of these bodies on the loop would stall it for seconds. 250 ms leaves room
+    # for scheduling on a loaded 2-core CI machine (144 ms seen there once; 100 ms was flaky).
+    assert loop_lag_ms <= 250, f"the event loop stalled {loop_lag_ms} ms"
     assert lags, "the poller never got an answer"  # and the loop kept answering
