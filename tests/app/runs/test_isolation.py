@@ -188,7 +188,7 @@ def test_a_run_over_its_memory_limit_fails_alone(backend: str, fresh_url) -> Non
         first.stop()
     # The full KF's covariance on an 80×80 grid is 6400² doubles, 312 MiB: over the smallest
     # budget, 256 MiB (never allocated: the allocation fails). The other run is a copy of
-    # the template, paced to outlast the hungry one.
+    # the template on the same server; when its worker claims it is a matter of start-up.
     hungry = _hungry_copy(url, template, 80)
     modest = _copy(url, template, pace=4)
     server = Server(url, workers=2, env={"MAPWISE_RUN_MEMORY_MB": "256"})
@@ -197,7 +197,6 @@ def test_a_run_over_its_memory_limit_fails_alone(backend: str, fresh_url) -> Non
         assert failed["status"] == "failed", failed
         assert failed["error"] == out_of_memory_message(256), failed
         assert (failed["attempt"], failed["lost_attempts"]) == (1, 0)  # its worker lived on
-        assert server.get(f"/api/runs/{modest}")["status"] == "running"
         done = server.wait_run(modest, FINISHED, timeout=60)
         assert done["status"] == "succeeded", done
         assert (done["attempt"], done["lost_attempts"]) == (1, 0)
