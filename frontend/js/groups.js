@@ -2,8 +2,10 @@
  * What the Sweeps and Batches views share: a group's progress, sortable table headers whose
  * state lives in the URL (?sort=key:asc). Both poll (poll.js) while any run is queued or running.
  */
-import { RUN_ACTIVE, SELECT } from "./constants.js";
-import { fmt, fmtDate, h, metricLabel } from "./dom.js";
+import { api } from "./api.js";
+import { GROUP_POLL_MS, RUN_ACTIVE, SELECT } from "./constants.js";
+import { fill, fmt, fmtDate, h, metricLabel } from "./dom.js";
+import { poll } from "./poll.js";
 
 /** Datasets a batch's row of the list names (the rest are counted). */
 const LISTED_DATASETS = 4;
@@ -193,5 +195,40 @@ export function groupTable(groups, { kind, datasetName }) {
       h("thead", {}, head),
       h("tbody", {}, rows),
     ),
+  );
+}
+
+/**
+ * Shows a sweep or batch now, then re-reads it from `url` while any of its runs is active.
+ * A failed read keeps the last state on screen, says so in `progressHost` and tries again
+ * (a restarting server, a lost connection).
+ */
+export async function followGroup(ctx, url, progressHost, show) {
+  let first = true;
+  let group = null;
+  await poll(
+    ctx.signal,
+    async () => {
+      if (!first) {
+        try {
+          group = await api.get(url, { signal: ctx.signal });
+        } catch (err) {
+          if (err.name === "AbortError") throw err;
+          fill(
+            progressHost,
+            h(
+              "div",
+              { class: "banner warn", role: "status" },
+              `Refresh failed (${err.message}); trying again.`,
+            ),
+          );
+          return true;
+        }
+      }
+      group = show(first ? null : group);
+      first = false;
+      return progressOf(group).active;
+    },
+    GROUP_POLL_MS,
   );
 }

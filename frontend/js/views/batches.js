@@ -21,7 +21,7 @@ import {
   pageHead,
   statusBadge,
 } from "../dom.js";
-import { groupTable, progressBar, progressOf } from "../groups.js";
+import { followGroup, groupTable, progressBar, progressOf } from "../groups.js";
 import { MapPlot, SliceGroup } from "../map-plot.js";
 import { axis, baseLayout, purge, react, STATIC_CONFIG, theme, withAlpha } from "../plot.js";
 import { poll } from "../poll.js";
@@ -429,33 +429,12 @@ async function batchView(root, ctx, id) {
     renderRuns();
   }
 
-  let fresh = true;
-  await poll(
-    ctx.signal,
-    async () => {
-      if (!fresh) {
-        try {
-          batch = await api.get(`/api/batches/${id}`, { signal: ctx.signal });
-        } catch (err) {
-          if (err.name === "AbortError") throw err;
-          fill(
-            progressHost,
-            h(
-              "div",
-              { class: "banner warn", role: "status" },
-              `Refresh failed (${err.message}); trying again.`,
-            ),
-          );
-          return true;
-        }
-      }
-      fresh = false;
-      render();
-      // Once every run is done the aggregate is in the same answer: nothing more to wait for.
-      return progressOf(batch).active;
-    },
-    GROUP_POLL_MS,
-  );
+  // Once every run is done the aggregate is in the same answer: nothing more to wait for.
+  await followGroup(ctx, `/api/batches/${id}`, progressHost, (fresh) => {
+    if (fresh) batch = fresh;
+    render();
+    return batch;
+  });
 
   const onTheme = () => {
     if (view.drawn) drawAll();

@@ -16,6 +16,7 @@ import {
   nextSort,
   parseSort,
   progressBar,
+  followGroup,
   progressOf,
   sortHeader,
   sortRows,
@@ -483,33 +484,11 @@ async function sweepView(root, ctx, id) {
   }
 
   /* ---------- refresh while runs go ---------- */
-  let first = true;
-  await poll(
-    ctx.signal,
-    async () => {
-      if (!first) {
-        try {
-          sweep = await api.get(`/api/sweeps/${id}`, { signal: ctx.signal });
-        } catch (err) {
-          if (err.name === "AbortError") throw err;
-          // Keep showing the last state and try again (a restarting server, a lost connection).
-          fill(
-            progressHost,
-            h(
-              "div",
-              { class: "banner warn", role: "status" },
-              `Refresh failed (${err.message}); trying again.`,
-            ),
-          );
-          return true;
-        }
-      }
-      first = false;
-      render();
-      return progressOf(sweep).active;
-    },
-    GROUP_POLL_MS,
-  );
+  await followGroup(ctx, `/api/sweeps/${id}`, progressHost, (fresh) => {
+    if (fresh) sweep = fresh;
+    render();
+    return sweep;
+  });
 
   const onTheme = () => drawPlots();
   window.addEventListener(EVT.themeChange, onTheme);
