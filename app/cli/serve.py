@@ -122,6 +122,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         dask_address=args.dask_address,
         seed_demo=False if args.no_demo else None,
     )
+    demo_run: int | None = None
     try:
         check = check_schema(settings.database_url)
         if check.state == "empty":
@@ -129,13 +130,17 @@ def _cmd_serve(args: argparse.Namespace) -> int:
             if settings.seed_demo:
                 from app.services.demo import seed_demo
 
-                run_id = seed_demo(settings)
+                demo_run = seed_demo(settings)
                 print(
-                    f"mapwise: new database: schema {check.head}, demo run {run_id}",
+                    f"mapwise: new database: schema {check.head}, demo run {demo_run}",
                     file=sys.stderr,
                 )
         elif check.state != "current":
             raise UsageError(check.message)
+        else:
+            from app.services.demo import demo_run_id
+
+            demo_run = demo_run_id(settings.database_url)
         if settings.auth_required and not _has_tokens(settings):
             print(
                 "mapwise: warning: authentication is required but no token exists; "
@@ -153,6 +158,10 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         )
     shown = "localhost" if settings.host in ("127.0.0.1", "::1") else settings.host
     print(f"mapwise: dashboard at http://{shown}:{settings.port}/", file=sys.stderr)
+    if demo_run is not None:
+        print(
+            f"mapwise: demo run at http://{shown}:{settings.port}/runs/{demo_run}", file=sys.stderr
+        )
     uvicorn.run(
         create_app(settings),
         host=settings.host,

@@ -22,6 +22,7 @@ DEMO_CONFIG = {
     "p0": 1.0e4,
     "sensor": {"lag": 0.96, "delay_s": 0.75, "sigma_f": 50.0},
 }
+DEMO_RUN_NAME = "Demo: SKF learns the NOx map (SKF (34) settings)"
 
 
 class _RunNow:
@@ -62,9 +63,25 @@ def seed_demo(settings: Settings) -> int:
                     ]
                 },
                 config=DEMO_CONFIG,
-                name="Demo: SKF learns the NOx map (SKF (34) settings)",
+                name=DEMO_RUN_NAME,
             )
         )
         return run.id
+    finally:
+        db.dispose()
+
+
+def demo_run_id(database_url: str) -> int | None:
+    """The id of the seeded demo run, or ``None`` when it was deleted or never seeded."""
+    from sqlalchemy import select
+
+    from app.db.models import RunRow
+
+    db = Database(database_url)
+    try:
+        with db.read() as s:
+            return s.scalar(
+                select(RunRow.id).where(RunRow.name == DEMO_RUN_NAME).order_by(RunRow.id).limit(1)
+            )
     finally:
         db.dispose()

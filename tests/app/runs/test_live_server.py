@@ -210,6 +210,9 @@ def test_empty_database_gets_schema_and_demo(backend: str, fresh_url) -> None:  
         assert len(runs) == 1
         assert runs[0]["status"] == "succeeded"
         assert runs[0]["estimator"] == "skf"
+        assert f"mapwise: demo run at http://localhost:{srv.port}/runs/{runs[0]['id']}" in (
+            srv.output()
+        )
         datasets = srv.get("/api/datasets")["items"]
         assert datasets[0]["rows"] == 7500
         assert srv.http.get("/", follow_redirects=False).headers["location"] == "/datasets"
