@@ -45,13 +45,20 @@ class Axis:
             raise ShapeError(f"axis {name!r}: needs at least two breakpoints, got {g.size}")
         if not np.all(np.isfinite(g)):
             raise ShapeError(f"axis {name!r}: breakpoints must be finite, got {g.tolist()}")
-        steps = np.diff(g)
-        if np.any(steps <= 0):
-            i = int(np.argmax(steps <= 0))
-            kind = "duplicate" if steps[i] == 0 else "unsorted"
+        # Compared, not differenced: np.diff of breakpoints near ±1.8e308 overflows.
+        bad = g[1:] <= g[:-1]
+        if np.any(bad):
+            i = int(np.argmax(bad))
+            kind = "duplicate" if g[i] == g[i + 1] else "unsorted"
             raise ShapeError(
                 f"axis {name!r}: breakpoints must be strictly increasing; {kind} at positions "
                 f"{i} and {i + 1} ({g[i]:g}, {g[i + 1]:g})"
+            )
+        with np.errstate(over="ignore"):
+            span = g[-1] - g[0]
+        if not np.isfinite(span):
+            raise ShapeError(
+                f"axis {name!r}: breakpoints span {g[0]:g} … {g[-1]:g}, beyond the float64 range"
             )
         g.setflags(write=False)
         object.__setattr__(self, "name", name)

@@ -22,7 +22,9 @@ X is the table's first axis and Y its second: the ``WERT`` line after ``ST/Y y_j
 comments INCA writes in group maps; other tools read them as comments). At most six
 numbers per line; numbers are written with ``repr`` so an export parses back bit-exactly.
 The parser also reads ``GRUPPEN…``/``FEST…`` variants of both blocks and skips every other
-block (``FESTWERT``, ``FUNKTIONEN``, …).
+block (``FESTWERT``, ``FUNKTIONEN``, …). :func:`blocks_to_dcm` writes calibration values
+keyed by their A2L names, whose axes need not increase
+(``docs/calibration.md#values``).
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ from __future__ import annotations
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -70,40 +73,86 @@ def maps_to_dcm(
 
 
 def _block(table: Table, name: str, unit: str, description: str) -> list[str]:
+    axes = [(a.name, a.unit, a.breakpoints) for a in table.axes]
+    return _block_lines(name, axes, table.values, unit, description)
+
+
+class DcmBlock(NamedTuple):
+    """One curve or map for :func:`blocks_to_dcm`: ``axes`` are ``(name, unit, points)``
+    in axis order; ``prefix`` is ``""``, ``"GRUPPEN"`` (shared axes) or ``"FEST"`` (fixed
+    axes), giving ``KENNLINIE``/``GRUPPENKENNLINIE``/``FESTKENNLINIE`` and likewise
+    ``…KENNFELD``."""
+
+    name: str
+    axes: Sequence[tuple[str, str, Sequence[float]]]
+    values: np.ndarray
+    unit: str = ""
+    description: str = ""
+    prefix: str = ""
+
+
+def blocks_to_dcm(blocks: Sequence[DcmBlock]) -> str:
+    """Several curves/maps in one DCM 2.0 file. Unlike :func:`maps_to_dcm` the axis points
+    need not increase (ECU axes as stored, e.g. point indices)."""
+    lines = ["* DCM export by mapwise", "KONSERVIERUNG_FORMAT 2.0", ""]
+    for block in blocks:
+        lines += _block_lines(
+            block.name,
+            block.axes,
+            np.asarray(block.values),
+            block.unit,
+            block.description,
+            prefix=block.prefix,
+        )
+        lines.append("")
+    return "\n".join(lines)
+
+
+def _block_lines(
+    name: str,
+    axes: Sequence[tuple[str, str, Sequence[float]]],
+    values: np.ndarray,
+    unit: str,
+    description: str,
+    *,
+    prefix: str = "",
+) -> list[str]:
+    if prefix not in ("", "GRUPPEN", "FEST"):
+        raise ValueError(f"DCM block prefix must be '', 'GRUPPEN' or 'FEST', got {prefix!r}")
     if not _NAME.match(name):
         raise InputError(
             f"DCM name {name!r} must start with a letter or '_' and hold only letters, "
             "digits, '_', '.', '[', ']'",
             field="name",
         )
-    if table.ndim not in (1, 2):
+    if len(axes) not in (1, 2):
         raise InputError(
-            f"DCM holds 1-D (KENNLINIE) and 2-D (KENNFELD) maps; this one has {table.ndim} axes",
+            f"DCM holds 1-D (KENNLINIE) and 2-D (KENNFELD) maps; this one has {len(axes)} axes",
             field="table",
         )
-    x = table.axes[0]
+    x_name, x_unit, x_points = axes[0]
     head = (
-        f"KENNLINIE {name} {x.size}"
-        if table.ndim == 1
-        else f"KENNFELD {name} {x.size} {table.axes[1].size}"
+        f"{prefix}KENNLINIE {name} {len(x_points)}"
+        if len(axes) == 1
+        else f"{prefix}KENNFELD {name} {len(x_points)} {len(axes[1][2])}"
     )
     lines = [head]
     if description:
         lines.append(f'   LANGNAME "{_text(description)}"')
-    lines.append(f'   EINHEIT_X "{_text(x.unit)}"')
-    if table.ndim == 2:
-        lines.append(f'   EINHEIT_Y "{_text(table.axes[1].unit)}"')
+    lines.append(f'   EINHEIT_X "{_text(x_unit)}"')
+    if len(axes) == 2:
+        lines.append(f'   EINHEIT_Y "{_text(axes[1][1])}"')
     lines.append(f'   EINHEIT_W "{_text(unit)}"')
-    lines.append(f"*SSTX\t{_text(x.name)}")
-    if table.ndim == 2:
-        lines.append(f"*SSTY\t{_text(table.axes[1].name)}")
-    lines += _numbers("ST/X", x.breakpoints)
-    if table.ndim == 1:
-        lines += _numbers("WERT", table.values)
+    lines.append(f"*SSTX\t{_text(x_name)}")
+    if len(axes) == 2:
+        lines.append(f"*SSTY\t{_text(axes[1][0])}")
+    lines += _numbers("ST/X", x_points)
+    if len(axes) == 1:
+        lines += _numbers("WERT", values)
     else:
-        for j, y in enumerate(table.axes[1].breakpoints):
+        for j, y in enumerate(axes[1][2]):
             lines += _numbers("ST/Y", [y])
-            lines += _numbers("WERT", table.values[:, j])
+            lines += _numbers("WERT", values[:, j])
     lines.append("END")
     return lines
 
@@ -127,6 +176,7 @@ class _Block:
     name: str
     line: int
     sizes: list[int]
+    description: str = ""
     units: dict[str, str] = field(default_factory=dict)
     axis_names: dict[str, str] = field(default_factory=dict)
     x: list[float] = field(default_factory=list)
@@ -234,6 +284,8 @@ def _add(block: _Block, words: list[str], number: int) -> None:
     where = f"line {number} ({block.kind} {block.name})"
     if keyword in ("EINHEIT_X", "EINHEIT_Y", "EINHEIT_W"):
         block.units[keyword[-1]] = words[1] if len(words) > 1 else ""
+    elif keyword == "LANGNAME":
+        block.description = words[1] if len(words) > 1 else ""
     elif keyword in ("ST/X", "ST/Y", "WERT"):
         values = _floats(words[1:], where, number)
         if keyword == "ST/X":
@@ -255,7 +307,7 @@ def _add(block: _Block, words: list[str], number: int) -> None:
             field=f"line {number}",
             line=number,
         )
-    # LANGNAME, FUNKTION, DISPLAYNAME, VAR and unknown keywords carry nothing we need.
+    # FUNKTION, DISPLAYNAME, VAR and unknown keywords carry nothing we need.
 
 
 def _floats(words: list[str], where: str, number: int) -> list[float]:
@@ -299,17 +351,20 @@ def _finish(block: _Block, end_line: int) -> _Block:
     return block
 
 
+def decode_text(data: bytes | str) -> str:
+    """The text of a DCM file: UTF-8 (with or without BOM), else Latin-1."""
+    if isinstance(data, str):
+        return data
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        return data.decode("latin-1")  # DCM files from older tools are Latin-1
+
+
 def map_from_dcm(data: bytes | str, *, name: str | None = None) -> tuple[str, str, Table]:
     """``(block name, value unit, table)`` of the KENNLINIE/KENNFELD called ``name``
     (or of the only one in the file)."""
-    if isinstance(data, bytes):
-        try:
-            text = data.decode("utf-8-sig")
-        except UnicodeDecodeError:
-            text = data.decode("latin-1")  # DCM files from older tools are Latin-1
-    else:
-        text = data
-    blocks = parse_dcm(text)
+    blocks = parse_dcm(decode_text(data))
     if not blocks:
         raise InputError("the DCM file holds no KENNLINIE or KENNFELD", field="file")
     if name is None:

@@ -147,6 +147,7 @@ def test_json_round_trip() -> None:
         ([0.0, np.inf], "finite"),
         ([0.0, np.nan, 2.0], "finite"),
         ([[0.0, 1.0], [2.0, 3.0]], "1-D"),
+        ([-1.7e308, 1.7e308], "beyond the float64 range"),
     ],
 )
 def test_bad_breakpoints_are_refused(breakpoints: list, match: str) -> None:
