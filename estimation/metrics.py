@@ -35,7 +35,12 @@ def cell_visits(table: Table, U: np.ndarray) -> np.ndarray:
 
 
 def map_metrics(
-    estimate: Table, truth: Table, U: np.ndarray, *, min_visits: float = 1.0
+    estimate: Table,
+    truth: Table,
+    U: np.ndarray,
+    *,
+    min_visits: float = 1.0,
+    truth_along: np.ndarray | None = None,
 ) -> dict[str, float]:
     """How well ``estimate`` matches ``truth`` where the operating points ``U`` went.
 
@@ -44,6 +49,9 @@ def map_metrics(
     * ``mean_relative_error`` — LPV §4 as defined in docs/algorithms.md §3, robust where the map
       crosses zero: ``Σ_k |T̂(υ_k) − T(υ_k)| / Σ_k |T(υ_k)|`` along the trajectory;
     * ``coverage`` — fraction of cells visited; ``visited_cells`` their number.
+
+    ``truth_along`` (n,): the true values at ``U`` when the truth is a function off the grid
+    (docs/fidelity.md); ``truth`` is then its value at the nodes. Default ``truth.evaluate(U)``.
     """
     if estimate.shape != truth.shape or any(
         not np.array_equal(a.breakpoints, b.breakpoints)
@@ -52,8 +60,11 @@ def map_metrics(
         raise ShapeError("estimate and truth must share the same grid")
     visited = cell_visits(truth, U) >= min_visits
     error = estimate.values - truth.values
-    along = np.abs(estimate.evaluate(U) - truth.evaluate(U))
-    scale = float(np.sum(np.abs(truth.evaluate(U))))
+    true_along = truth.evaluate(U) if truth_along is None else np.asarray(truth_along, float)
+    if true_along.shape != (len(U),):
+        raise ShapeError(f"truth_along has shape {true_along.shape}, U has {len(U)} points")
+    along = np.abs(estimate.evaluate(U) - true_along)
+    scale = float(np.sum(np.abs(true_along)))
     n_visited = int(visited.sum())
     return {
         "rmse": float(np.sqrt(np.mean(error[visited] ** 2))) if n_visited else float("nan"),
@@ -168,7 +179,7 @@ def score_run(
         return metrics
     true_map = truth.true_map
     if table is not None and true_map is not None and _same_grid(table, true_map):
-        found = map_metrics(table, true_map, truth.scoring_points())
+        found = map_metrics(table, true_map, truth.scoring_points(), truth_along=truth.true_along)
         if truth.scored_series:
             found["map_rmse"] = found.pop("rmse")
         metrics |= found

@@ -1,13 +1,22 @@
 """Named, seeded, reproducible scenarios: cycle + plant + sensor error + noise + truth.
 
 Tests, benchmarks, the demo and the dashboard's "simulate" button all draw on this catalog.
-``get_scenario(name).build(seed=…)`` returns the measured signals with units and the truth;
-``default_config(estimator)`` is the config a map estimator starts from on that scenario
-(the papers' settings), which callers may override key by key.
+``get_scenario(name).build(seed=…, mismatch=…)`` returns the measured signals with units and
+the truth; ``default_config(estimator, data=…)`` is the config a map estimator starts from on
+that realisation (the papers' settings with the estimator-side model constants of the
+realisation), which callers may override key by key.
+
+``mismatch`` (:mod:`estimation.mismatch`, docs/fidelity.md) is ``"nominal"`` by default: the
+true maps are smooth functions evaluated off-grid (:mod:`estimation.truth_maps`) and the
+estimators' model constants are drawn around the plant's; ``"none"`` is the perfect-model
+setting (the estimators' constants are the plant's, the truth a table on their grid);
+``"severe"`` doubles the ranges. ``ScenarioData.metadata`` records the level, the logging
+(sensor averaging) and every drawn constant beside the plant's.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -15,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from estimation.errors import ConfigError
+from estimation.mismatch import MismatchDraw, MismatchLevel, check_level
 from estimation.registry import EstimatorKind, names
 from estimation.signals import Signals
 from estimation.table import Table
@@ -31,6 +41,14 @@ class ScenarioData:
     ``(n, d)`` the map is scored along; by default the ``map_inputs`` channels.
     ``scored_series`` maps an estimator output name (e.g. ``torque_nm``, ``w_c_kg_s``) to its
     true series, one value per sample, which ``mapwise run`` scores the estimate against.
+
+    With an off-grid truth (``mismatch`` not ``"none"``) ``true_map`` is the true function at
+    the nodes and ``true_along`` its value at each scoring point, which the map metrics use
+    (:func:`estimation.metrics.map_metrics`). ``metadata`` holds ``mismatch``, ``truth``
+    (``"table"`` or ``"function"``), ``averaging`` (sensor readings averaged per logged
+    sample, ``None`` where the scenario has no such sensors) and ``parameters`` (every
+    estimator-side constant beside the plant's, :class:`estimation.mismatch.MismatchDraw`);
+    ``estimator_params`` maps those names to the estimator-side values.
     """
 
     scenario: str
@@ -42,6 +60,13 @@ class ScenarioData:
     map_output: str | None = None
     map_points: np.ndarray | None = None
     scored_series: dict[str, np.ndarray] = field(default_factory=dict)
+    true_along: np.ndarray | None = None
+    metadata: dict[str, Any] = field(default_factory=dict)
+    estimator_params: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def mismatch(self) -> str:
+        return str(self.metadata.get("mismatch", "none"))
 
     def scoring_points(self) -> np.ndarray:
         if self.true_map is None:
@@ -61,20 +86,47 @@ class Scenario:
     duration_s: float
     channels: tuple[tuple[str, str], ...]
     suggested: tuple[str, ...]
-    builder: Callable[[int, float | None], ScenarioData] = field(repr=False)
-    configs: Callable[[str], dict[str, Any] | None] = field(repr=False)
+    builder: Callable[[Build], ScenarioData] = field(repr=False)
+    configs: Callable[..., dict[str, Any] | None] = field(repr=False)
+    """``configs(estimator, drawn=None)``: the config, ``None`` where it does not apply."""
+    logging: str = "single readings per logged sample"
+    averaging: int | None = None
 
-    def build(self, *, seed: int = 0, duration_s: float | None = None) -> ScenarioData:
+    def build(
+        self,
+        *,
+        seed: int = 0,
+        duration_s: float | None = None,
+        mismatch: MismatchLevel = "nominal",
+        averaging: int | None = None,
+    ) -> ScenarioData:
+        """One realisation. ``averaging``: sensor readings averaged per logged sample
+        (air-path scenarios only; default: the scenario's stated logging, ``self.logging``)."""
         if duration_s is not None and not 0 < duration_s <= self.duration_s:
             raise ConfigError(
                 f"duration must be in (0, {self.duration_s:g}] s for {self.name!r}, "
                 f"got {duration_s:g}"
             )
-        return self.builder(int(seed), duration_s)
+        level = check_level(mismatch)
+        if averaging is not None:
+            if self.averaging is None:
+                raise ConfigError(
+                    f"averaging applies to the air-path scenarios; {self.name!r} logs "
+                    f"{self.logging}"
+                )
+            if isinstance(averaging, bool) or not isinstance(averaging, int | np.integer):
+                raise ConfigError(f"averaging must be an integer ≥ 1, got {averaging!r}")
+            if not 1 <= averaging <= 1000:
+                raise ConfigError(f"averaging must be in [1, 1000] readings, got {averaging}")
+        return self.builder(Build(int(seed), duration_s, level, averaging))
 
-    def default_config(self, estimator: str) -> dict[str, Any]:
-        """The starting config of ``estimator`` on this scenario (papers' settings)."""
-        config = self.configs(estimator)
+    def default_config(self, estimator: str, data: ScenarioData | None = None) -> dict[str, Any]:
+        """The starting config of ``estimator`` on this scenario (papers' settings). With
+        ``data`` (a realisation of this scenario), the estimator-side model constants drawn
+        for it (``data.estimator_params``); without, the estimators' documented defaults."""
+        if data is not None and data.scenario != self.name:
+            raise ConfigError(f"data of {data.scenario!r} given for scenario {self.name!r}")
+        config = self.configs(estimator, {} if data is None else data.estimator_params)
         if config is None:
             raise ConfigError(
                 f"estimator {estimator!r} does not apply to scenario {self.name!r}; "
@@ -90,7 +142,35 @@ class Scenario:
             "duration_s": self.duration_s,
             "channels": [{"name": n, "unit": u} for n, u in self.channels],
             "suggested_estimators": list(self.suggested),
+            "logging": self.logging,
         }
+
+
+@dataclass(frozen=True, slots=True)
+class Build:
+    """What a builder is asked for: seed, duration (``None``: whole record), mismatch level
+    and sensor averaging (``None``: the scenario's stated logging)."""
+
+    seed: int
+    duration_s: float | None
+    mismatch: MismatchLevel
+    averaging: int | None
+
+    def draw(self, scenario: str) -> MismatchDraw:
+        return MismatchDraw(scenario, self.seed, self.mismatch)
+
+    @property
+    def off_grid(self) -> bool:
+        return self.mismatch != "none"
+
+
+def _metadata(build: Build, draw: MismatchDraw | None, averaging: int | None) -> dict[str, Any]:
+    return {
+        "mismatch": build.mismatch,
+        "truth": "function" if build.off_grid else "table",
+        "averaging": averaging,
+        "parameters": [] if draw is None else list(draw.records),
+    }
 
 
 def table_filter_config(
@@ -137,19 +217,23 @@ def _truncate(signals: Signals, duration_s: float | None) -> Signals:
 def _skf_sim(number: int) -> Scenario:
     from estimation.plants.synthetic import skf_sim, skf_sim_table
 
-    def build(seed: int, duration_s: float | None) -> ScenarioData:
-        signals, truth = skf_sim(number, seed=seed)  # type: ignore[arg-type]
+    def build(b: Build) -> ScenarioData:
+        # The SKF paper's synthetic problems: the truth y = 1 is constant (any grid represents
+        # it) and the filters have no model constants, only the paper's σ; every level is the
+        # paper's problem (docs/fidelity.md).
+        signals, truth = skf_sim(number, seed=b.seed)  # type: ignore[arg-type]
         return ScenarioData(
             scenario=f"skf-sim{number}",
-            seed=seed,
-            signals=_truncate(signals, duration_s),
+            seed=b.seed,
+            signals=_truncate(signals, b.duration_s),
             truth=truth.to_dict(),
             true_map=truth.table,
             map_inputs=("u1", "u2"),
             map_output="y",
+            metadata=_metadata(b, None, None),
         )
 
-    def configs(estimator: str) -> dict[str, Any] | None:
+    def configs(estimator: str, drawn: dict[str, float] | None = None) -> dict[str, Any] | None:
         # SKF §5: θ0 = 0, P0 = 0, σv² = σw² = 1.
         return table_filter_config(
             estimator, skf_sim_table(), "y", sigma_w=1.0, sigma_v=1.0, p0=0.0
@@ -179,42 +263,65 @@ def _skf_sim(number: int) -> Scenario:
 def _nox(name: str, cycle: str, description: str, duration_s: float) -> Scenario:
     rate_hz = 50.0
 
-    def build(seed: int, duration: float | None) -> ScenarioData:
+    def build(b: Build) -> ScenarioData:
         from estimation.cycles import load_cycle, make_sdmp
-        from estimation.plants.nox import simulate_nox
+        from estimation.plants.nox import DEFAULT_NOX_PARAMS, simulate_nox
         from estimation.plants.vehicle import operating_points
+        from estimation.signals import delay_samples
+        from estimation.truth_maps import NOX_BASE
 
-        drive = make_sdmp(seed=seed) if cycle == "sdmp" else load_cycle(cycle)
+        drive = make_sdmp(seed=b.seed) if cycle == "sdmp" else load_cycle(cycle)
         points = operating_points(drive, rate_hz=rate_hz)
-        stop = points.time_s.size if duration is None else int(duration * rate_hz) + 1
+        stop = points.time_s.size if b.duration_s is None else int(b.duration_s * rate_hz) + 1
         signals, truth = simulate_nox(
             points.time_s[:stop],
             points.speed_rpm[:stop],
             points.fuel_mg_per_cycle[:stop],
-            seed=seed,
+            seed=b.seed,
+            base_function=NOX_BASE if b.off_grid else None,
         )
-        return ScenarioData(
+        plant = DEFAULT_NOX_PARAMS
+        draw = b.draw(name)
+        draw.time_constant_pole("sensor_lag", plant.lag, 1.0 / rate_hz)
+        draw.samples("sensor_delay_samples", delay_samples(plant.delay_s, 1.0 / rate_hz))
+        draw.relative("sigma_v_ppm", plant.noise_std_ppm, "noise_sigma", "ppm")
+        data = ScenarioData(
             scenario=name,
-            seed=seed,
+            seed=b.seed,
             signals=signals,
             truth=truth.to_dict(),
             true_map=truth.final_map,
             map_inputs=("speed_rpm", "fuel_mg_per_stroke"),
             map_output="nox_ppm",
+            metadata=_metadata(b, draw, None),
+            estimator_params=draw.values(),
         )
+        if not b.off_grid:
+            return data
+        age = truth.age_h_at(float(truth.time_s[-1]))
+        base = NOX_BASE(data.scoring_points())
+        along = (1.0 + plant.drift_gain_per_h * age) * base + plant.drift_offset_ppm_per_h * age
+        return dataclasses.replace(data, true_along=along)
 
-    def configs(estimator: str) -> dict[str, Any] | None:
+    def configs(estimator: str, drawn: dict[str, float] | None = None) -> dict[str, Any] | None:
         from estimation.plants.nox import nox_base_map
 
         # SKF (34): σv = 25, σw = 15, σf = 50 ppm, a = 0.96, τ = 0.75 s at 50 Hz; T_NOx,0 = 0.
-        sensor = {"lag": 0.96, "delay_s": 0.75, "sigma_f": 50.0}
+        # Under mismatch the sensor's pole, delay and σv are the realisation's drawn values.
+        drawn = drawn or {}
+        delay = drawn.get("sensor_delay_samples")
+        sensor = {
+            "lag": drawn.get("sensor_lag", 0.96),
+            "delay_s": 0.75 if delay is None else delay / rate_hz,
+            "sigma_f": 50.0,
+        }
         config = table_filter_config(
             estimator,
             nox_base_map(),
             "nox_ppm",
             output_unit="ppm",
             sigma_w=15.0,
-            sigma_v=25.0,
+            sigma_v=drawn.get("sigma_v_ppm", 25.0),
             p0=1.0e4,
             sensor=sensor,
         )
@@ -251,45 +358,132 @@ _LPV_FULL_LOAD_RPM = (800.0, 1000.0, 1250.0, 1500.0, 1750.0, 2500.0, 3000.0, 325
 _LPV_FULL_LOAD_NM = (118.0, 162.0, 221.0, 263.0, 280.0, 280.0, 255.0, 126.0, 0.0)
 
 
-# The LPV scenarios' sensors: the default reading noise (1 kPa, 1 % MAF, 0.5 % ω_t) with the
-# ECU reading every sensor in its 10 ms task and logging the mean of the ten readings of each
-# 100 ms sample (NoiseSpec.averaged_readings): σ/√10 per logged sample. The LPV paper's
-# enDYNA signals are noise-free; with single 1 kPa readings per sample the EGR-valve flow
-# near Π_egr ≈ 1, which ρ1 needs, is too noisy for its accuracy figures (see
-# tests/estimation/test_lpv.py).
-_MAF_2D_NOISE_READINGS = 10
+# The air-path scenarios' logging (every level but "none"): the ECU reads every sensor in its
+# 10 ms task and logs the mean of the ten readings of each 100 ms sample
+# (NoiseSpec.averaged_readings): σ/√10 per logged sample, for every air-path scenario alike.
+# ``averaging=1`` logs single readings. At "none" the pre-issue-17 logging is kept (ten
+# readings on the 2-D scenarios, single readings on maf-1d-whtc) so those runs reproduce.
+_AIRPATH_READINGS = 10
+_AIRPATH_LOGGING = "mean of 10 readings (10 ms) per 100 ms sample"
+
+# Estimator-side air-path constants drawn under mismatch (estimation.observers.airpath_model).
+_AIRPATH_DRAWN: tuple[tuple[str, str, str], ...] = (
+    ("V_im", "volume", "m³"),
+    ("V_em", "volume", "m³"),
+    ("c_vol3", "efficiency", "-"),
+    ("eta_cmax", "efficiency", "-"),
+    ("eta_tmmax", "efficiency", "-"),
+    ("A_egrmax", "flow_area", "m²"),
+    ("A_vgtmax", "flow_area", "m²"),
+    ("J_t", "inertia", "kg m²"),
+)
+# The observers' flow model is then identified (estimation.observers.airpath_identify) on the
+# first 600 s of the other cycle, driven with its own noise (seed + _ID_SEED_OFFSET) and
+# logged with a reference flow meter in place of the MAF under test.
+_ID_CYCLE = {"whtc": "ftp75", "ftp75": "whtc"}
+_AIRPATH_MODEL = tuple(p for p, _, _ in _AIRPATH_DRAWN)
+_ID_DURATION_S = 600.0
+_ID_SEED_OFFSET = 500_000
+# The EKFs' sensor σ, drawn around the plant's logged σ (single reading / √averaging).
+_AIRPATH_SIGMAS: tuple[tuple[str, str, str], ...] = (
+    ("sigma_maf_rel", "maf_rel", "-"),
+    ("sigma_p_im", "p_im_pa", "Pa"),
+    ("sigma_p_em", "p_em_pa", "Pa"),
+    ("sigma_omega_t_rel", "omega_t_rel", "-"),
+)
+
+
+def _airpath_points(cycle: str, rate_hz: float) -> Any:
+    from estimation.cycles import load_cycle
+    from estimation.plants.engine import DieselEngine
+    from estimation.plants.vehicle import operating_points
+
+    engine = None
+    if cycle == "whtc":
+        engine = DieselEngine(
+            rated_speed_rpm=3000.0,
+            full_load_speed_rpm=_LPV_FULL_LOAD_RPM,
+            full_load_torque_nm=_LPV_FULL_LOAD_NM,
+        )
+    return operating_points(load_cycle(cycle), rate_hz=rate_hz, engine=engine)
+
+
+def _identified_model(
+    cycle: str, seed: int, noise: Any, drawn: dict[str, float], rate_hz: float
+) -> tuple[dict[str, float], dict[str, Any]]:
+    """The drawn air-path model with its flow terms identified on the identification segment
+    (``_ID_CYCLE``); returns the model's values and a report for the metadata."""
+    from estimation.observers.airpath_identify import DEFAULT_FIT, identify_flow_model
+    from estimation.observers.airpath_model import AirpathModelConfig
+    from estimation.plants.airpath import simulate_airpath
+    from estimation.plants.airpath_params import AirpathParams
+    from estimation.plants.airpath_sensors import MafErrorSpec
+
+    id_cycle = _ID_CYCLE[cycle]
+    points = _airpath_points(id_cycle, rate_hz)
+    stop = int(_ID_DURATION_S * rate_hz) + 1
+    signals, _ = simulate_airpath(
+        points.time_s[:stop],
+        points.fuel_mg_per_cycle[:stop],
+        points.speed_rpm[:stop],
+        seed=seed + _ID_SEED_OFFSET,
+        maf_error=MafErrorSpec.none(),
+        noise=noise,
+        rate_hz=rate_hz,
+        reuse_plant_run=True,
+    )
+    model, report = identify_flow_model(signals, signals["maf_kg_s"], AirpathModelConfig(**drawn))
+    plant = AirpathParams.scaled()
+    report |= {
+        "segment": f"{id_cycle} 0–{_ID_DURATION_S:g} s, reference flow meter",
+        "plant": {name: float(getattr(plant, name)) for name in DEFAULT_FIT},
+        "drawn": {name: float(drawn[name]) for name in DEFAULT_FIT},
+    }
+    return model.model_dump(), report
 
 
 def _maf(name: str, cycle: str, kind: str, description: str, duration_s: float) -> Scenario:
     rate_hz = 10.0
 
-    def build(seed: int, duration: float | None) -> ScenarioData:
-        from estimation.cycles import load_cycle
+    def build(b: Build) -> ScenarioData:
         from estimation.plants.airpath import simulate_airpath
         from estimation.plants.airpath_sensors import MafErrorSpec, NoiseSpec
-        from estimation.plants.engine import DieselEngine
-        from estimation.plants.vehicle import operating_points
+        from estimation.truth_maps import MAF_ERROR_2D, MAF_RELATIVE_1D
 
-        engine = None
-        if cycle == "whtc":
-            engine = DieselEngine(
-                rated_speed_rpm=3000.0,
-                full_load_speed_rpm=_LPV_FULL_LOAD_RPM,
-                full_load_torque_nm=_LPV_FULL_LOAD_NM,
-            )
-        points = operating_points(load_cycle(cycle), rate_hz=rate_hz, engine=engine)
-        stop = points.time_s.size if duration is None else int(duration * rate_hz) + 1
+        points = _airpath_points(cycle, rate_hz)
+        stop = points.time_s.size if b.duration_s is None else int(b.duration_s * rate_hz) + 1
         spec = MafErrorSpec.additive_2d() if kind == "2d" else MafErrorSpec.relative_1d()
+        truth_map = MAF_ERROR_2D if kind == "2d" else MAF_RELATIVE_1D
+        if b.off_grid:
+            spec = dataclasses.replace(spec, function=truth_map)
+        averaging = b.averaging
+        if averaging is None:
+            averaging = _AIRPATH_READINGS if b.off_grid or kind == "2d" else 1
+        noise = NoiseSpec(averaged_readings=averaging)
         signals, truth = simulate_airpath(
             points.time_s[:stop],
             points.fuel_mg_per_cycle[:stop],
             points.speed_rpm[:stop],
-            seed=seed,
+            seed=b.seed,
             maf_error=spec,
-            noise=NoiseSpec(averaged_readings=_MAF_2D_NOISE_READINGS if kind == "2d" else 1),
+            noise=noise,
             rate_hz=rate_hz,
             reuse_plant_run=True,
         )
+        draw = b.draw(name)
+        for param, cls, unit in _AIRPATH_DRAWN:
+            draw.relative(param, getattr(truth.params, param), cls, unit)  # type: ignore[arg-type]
+        for param, plant_name, unit in _AIRPATH_SIGMAS:
+            logged = getattr(noise, plant_name) * noise.logged_scale()
+            draw.relative(param, logged, "noise_sigma", unit)
+        metadata = _metadata(b, draw, averaging)
+        estimator_params = draw.values()
+        if b.off_grid:
+            drawn_model = {p: estimator_params[p] for p, _, _ in _AIRPATH_DRAWN}
+            model, metadata["identification"] = _identified_model(
+                cycle, b.seed, noise, drawn_model, rate_hz
+            )
+            estimator_params |= {p: model[p] for p in _AIRPATH_MODEL}
         true_map = spec.table
         assert true_map is not None
         if kind == "2d":
@@ -300,7 +494,7 @@ def _maf(name: str, cycle: str, kind: str, description: str, duration_s: float) 
             points_true = truth["w_c_kg_s"][:, None]
         return ScenarioData(
             scenario=name,
-            seed=seed,
+            seed=b.seed,
             signals=signals,
             truth=truth.to_dict(),
             true_map=true_map,
@@ -308,6 +502,9 @@ def _maf(name: str, cycle: str, kind: str, description: str, duration_s: float) 
             map_output=None,
             map_points=points_true,
             scored_series={"w_c_kg_s": truth["w_c_kg_s"]},
+            true_along=truth_map(points_true) if b.off_grid else None,
+            metadata=metadata,
+            estimator_params=estimator_params,
         )
 
     suggested = ("lpv",) if kind == "2d" else ("ekf-map", "ekf-aug", "ekf-def")
@@ -328,15 +525,24 @@ def _maf(name: str, cycle: str, kind: str, description: str, duration_s: float) 
         ),
         suggested=suggested,
         builder=build,
-        configs=lambda estimator: _maf_config(estimator, kind, suggested),
+        configs=lambda estimator, drawn=None: _maf_config(estimator, kind, suggested, drawn or {}),
+        logging=_AIRPATH_LOGGING,
+        averaging=_AIRPATH_READINGS,
     )
 
 
-def _maf_config(estimator: str, kind: str, suggested: tuple[str, ...]) -> dict[str, Any] | None:
+def _maf_config(
+    estimator: str, kind: str, suggested: tuple[str, ...], drawn: dict[str, float]
+) -> dict[str, Any] | None:
     """Configs on the MAF scenarios: the EKF observers (EKF §5.1) run on all of them, Map only
-    where the true error is its 1-D relative map (on the scenario's own W grid)."""
+    where the true error is its 1-D relative map (on the scenario's own W grid). With drawn
+    constants (mismatch), each observer gets its drawn air-path model, the LPV observer
+    computes ρ with it, and the EKFs get their drawn sensor σ."""
+    model = {p: drawn[p] for p in _AIRPATH_MODEL if p in drawn}
+    sigmas = {p: drawn[p] for p, _, _ in _AIRPATH_SIGMAS if p in drawn}
+    mismatched: dict[str, Any] = {"model": model} if model else {}
     if estimator in ("ekf-def", "ekf-aug"):
-        return {}
+        return mismatched | sigmas
     if estimator == "ekf-map":
         if kind != "1d":
             return None
@@ -344,8 +550,10 @@ def _maf_config(estimator: str, kind: str, suggested: tuple[str, ...]) -> dict[s
 
         table = MafErrorSpec.relative_1d().table
         assert table is not None
-        return {"breakpoints": [float(b) for b in table.axes[0].breakpoints]}
-    return {} if estimator in suggested else None
+        return {"breakpoints": [float(b) for b in table.axes[0].breakpoints]} | mismatched | sigmas
+    if estimator not in suggested:
+        return None
+    return mismatched | ({"rho_source": "model"} if model else {})
 
 
 # --- Torque paper: effective torque from speed, load and air flow -------------------------
@@ -354,26 +562,31 @@ def _maf_config(estimator: str, kind: str, suggested: tuple[str, ...]) -> dict[s
 def _torque(name: str, description: str, channels: tuple[tuple[str, str], ...]) -> Scenario:
     rate_hz = 1000.0
 
-    def build(seed: int, duration: float | None) -> ScenarioData:
+    def build(b: Build) -> ScenarioData:
         from estimation.plants.torque import simulate_si_torque, simulate_torque_rig
 
         simulate = simulate_si_torque if name == "torque-si" else simulate_torque_rig
-        signals, truth = simulate(seed=seed, duration_s=duration, rate_hz=rate_hz)
+        signals, truth = simulate(seed=b.seed, duration_s=b.duration_s, rate_hz=rate_hz)
+        draw = b.draw(name)
+        draw.relative("J_nm_s_per_rpm", truth.J_nm_s_per_rpm, "inertia", "N·m·s/rpm")
         return ScenarioData(
             scenario=name,
-            seed=seed,
+            seed=b.seed,
             signals=signals,
             truth=truth.to_dict(),
             scored_series={"torque_nm": truth.torque_nm},
+            metadata=_metadata(b, draw, None),
+            estimator_params=draw.values(),
         )
 
-    def configs(estimator: str) -> dict[str, Any] | None:
+    def configs(estimator: str, drawn: dict[str, float] | None = None) -> dict[str, Any] | None:
         from estimation.plants.torque_params import DieselRigParams, SiEngineParams
 
         if estimator not in names(EstimatorKind.TORQUE):
             return None
         params = SiEngineParams() if name == "torque-si" else DieselRigParams()
-        config: dict[str, Any] = {"J_nm_s_per_rpm": params.J_nm_s_per_rpm}
+        J = (drawn or {}).get("J_nm_s_per_rpm", params.J_nm_s_per_rpm)
+        config: dict[str, Any] = {"J_nm_s_per_rpm": J}
         if estimator == "smo":
             config["lambda1"] = 150.0 if name == "torque-si" else 350.0  # TQ §VI, §VII
         return config

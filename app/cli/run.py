@@ -2,8 +2,13 @@
 
 With ``--json`` it prints (a contract)::
 
-    {"scenario", "estimator", "seed", "config", "metrics": {...}, "timing": {"estimate_s"},
+    {"scenario", "estimator", "seed", "mismatch", "logging", "estimator_model", "config",
+     "metrics": {...}, "timing": {"estimate_s"},
      "map": <the map document of app.io.map_json>}        # "map" for map estimators only
+
+``mismatch`` is the level the scenario was built at (``--mismatch``, default ``nominal``;
+docs/fidelity.md), ``logging`` the sensor averaging of the log, ``estimator_model`` every
+estimator-side model constant beside the plant's.
 
 Map metrics: ``rmse`` and ``max_abs_error`` against the true map on visited cells,
 ``mean_relative_error`` (LPV §4 as defined in docs/algorithms.md §3), ``coverage``; plus
@@ -23,6 +28,7 @@ import argparse
 import dataclasses
 import json
 import time
+from contextvars import ContextVar
 from dataclasses import dataclass
 from typing import Any
 
@@ -33,8 +39,13 @@ from app.services.overrides import merge
 from estimation.errors import ConfigError
 from estimation.estimator import Estimator, Snapshot
 from estimation.metrics import score_run
+from estimation.mismatch import LEVELS
 from estimation.registry import get_spec, names
 from estimation.scenarios import ScenarioData, get_scenario, scenarios
+
+MISMATCH: ContextVar[str] = ContextVar("mismatch", default="nominal")
+"""The mismatch level :func:`execute_scenario` builds at when not told (``mapwise reproduce
+--mismatch`` sets it for a whole report)."""
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -53,9 +64,27 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--estimator", required=True, help=f"estimator name: {', '.join(names())}")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--duration", type=float, help="simulate only the first S seconds")
+    add_mismatch_arguments(p)
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     p.add_argument("--json", action="store_true", help="print the result document as JSON")
     p.set_defaults(handler=run_command)
+
+
+def add_mismatch_arguments(p: argparse.ArgumentParser) -> None:
+    """``--mismatch`` and ``--averaging`` (docs/fidelity.md)."""
+    p.add_argument(
+        "--mismatch",
+        choices=LEVELS,
+        default="nominal",
+        help="plant/estimator model mismatch (default nominal; none = the perfect-model runs)",
+    )
+    p.add_argument(
+        "--averaging",
+        type=int,
+        metavar="N",
+        help="air-path scenarios: sensor readings averaged per logged sample (default: the "
+        "scenario's logging; 1 = single readings)",
+    )
 
 
 def run_command(args: argparse.Namespace) -> int:
@@ -66,13 +95,15 @@ def run_command(args: argparse.Namespace) -> int:
         seed=args.seed,
         overrides=parse_set(args.set),
         duration_s=args.duration,
+        mismatch=args.mismatch,
+        averaging=args.averaging,
     )
     if args.json:
         print(json.dumps(result))
         return 0
     print(
-        f"{result['estimator']} on {result['scenario']} (seed {result['seed']}), "
-        f"{result['timing']['estimate_s']:.3f} s"
+        f"{result['estimator']} on {result['scenario']} (seed {result['seed']}, mismatch "
+        f"{result['mismatch']}, {result['logging']}), {result['timing']['estimate_s']:.3f} s"
     )
     for key, value in result["metrics"].items():
         print(f"  {key:<22} {'n/a' if value is None else f'{value:.6g}'}")
@@ -112,10 +143,18 @@ def run_scenario(
     seed: int = 0,
     overrides: dict[str, Any] | None = None,
     duration_s: float | None = None,
+    mismatch: str | None = None,
+    averaging: int | None = None,
 ) -> dict[str, Any]:
     """Build the scenario, run the estimator over it, and score the result."""
     return execute_scenario(
-        scenario_name, estimator_name, seed=seed, overrides=overrides, duration_s=duration_s
+        scenario_name,
+        estimator_name,
+        seed=seed,
+        overrides=overrides,
+        duration_s=duration_s,
+        mismatch=mismatch,
+        averaging=averaging,
     ).result
 
 
@@ -143,23 +182,34 @@ def execute_scenario(
     duration_s: float | None = None,
     data: ScenarioData | None = None,
     every: int | None = None,
+    mismatch: str | None = None,
+    averaging: int | None = None,
 ) -> ScenarioRun:
     """:func:`run_scenario` keeping the data and the final snapshot.
 
     ``data``: a realisation of the scenario already built (same name and seed), reused
     instead of simulating again. ``every``: run in chunks of that many samples and keep the
     snapshot after each (resuming equals the uninterrupted run, so the score is the same).
+    ``mismatch`` (default :data:`MISMATCH`'s value, ``"nominal"``) and ``averaging``: see
+    :meth:`estimation.scenarios.Scenario.build`. The estimator starts from the realisation's
+    config (its drawn model constants), then ``overrides``.
     """
     scenario = get_scenario(scenario_name)
     spec = get_spec(estimator_name)
-    config = merge(scenario.default_config(estimator_name), overrides or {})
-    estimator = spec.build(config)
     if data is None:
-        data = scenario.build(seed=seed, duration_s=duration_s)
+        level = MISMATCH.get() if mismatch is None else mismatch
+        data = scenario.build(
+            seed=seed,
+            duration_s=duration_s,
+            mismatch=level,  # type: ignore[arg-type]
+            averaging=averaging,
+        )
     elif data.scenario != scenario.name or data.seed != seed:
         raise ConfigError(
             f"data of {data.scenario!r} seed {data.seed} given for {scenario.name!r} seed {seed}"
         )
+    config = merge(scenario.default_config(estimator_name, data=data), overrides or {})
+    estimator = spec.build(config)
     t0 = time.perf_counter()
     final, history = _run_chunked(estimator, data, every)
     estimate_s = time.perf_counter() - t0
@@ -167,6 +217,9 @@ def execute_scenario(
         "scenario": scenario.name,
         "estimator": spec.name,
         "seed": seed,
+        "mismatch": data.mismatch,
+        "logging": _logging(scenario.logging, data.metadata.get("averaging")),
+        "estimator_model": data.metadata.get("parameters", []),
         "config": estimator.config.model_dump(mode="json"),
         "metrics": {},
         "timing": {"estimate_s": estimate_s},
@@ -192,6 +245,12 @@ def _run_chunked(
     final = dataclasses.replace(last, chunk_start=0, outputs=outputs, status=status)
     history = tuple(dataclasses.replace(s, state=None, outputs={}, status=None) for s in snapshots)
     return final, history
+
+
+def _logging(stated: str, averaging: int | None) -> str:
+    if averaging is None:
+        return stated
+    return "single readings" if averaging == 1 else f"mean of {averaging} readings per sample"
 
 
 def _finite_or_none(value: float) -> float | None:

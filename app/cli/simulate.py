@@ -8,6 +8,7 @@ import json
 from pathlib import Path
 
 from app.cli.errors import UsageError
+from app.cli.run import add_mismatch_arguments
 from estimation.scenarios import get_scenario, scenarios
 
 
@@ -22,6 +23,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scenario", help=f"scenario name: {', '.join(scenarios())}")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--duration", type=float, help="simulate only the first S seconds")
+    add_mismatch_arguments(p)
     p.add_argument("--out", type=Path, metavar="FILE.csv", help="measured signals")
     p.add_argument("--truth", type=Path, metavar="T.json", help="the truth")
     p.add_argument("--plot", type=Path, metavar="OUT.html", help="a Plotly page of it all")
@@ -40,14 +42,24 @@ def run_command(args: argparse.Namespace) -> int:
         raise UsageError("--out FILE.csv (or --plot OUT.html) is required")
     from app.io.csv_files import write_csv
 
-    data = get_scenario(args.scenario).build(seed=args.seed, duration_s=args.duration)
+    data = get_scenario(args.scenario).build(
+        seed=args.seed,
+        duration_s=args.duration,
+        mismatch=args.mismatch,
+        averaging=args.averaging,
+    )
     written = []
     try:
         if args.out is not None:
             write_csv(data.signals, args.out)
             written.append(str(args.out))
         if args.truth is not None:
-            truth = {"scenario": data.scenario, "seed": data.seed, **data.truth}
+            truth = {
+                "scenario": data.scenario,
+                "seed": data.seed,
+                **data.truth,
+                "metadata": data.metadata,
+            }
             if data.true_map is not None:
                 truth["true_map"] = data.true_map.to_dict()
             args.truth.write_text(json.dumps(truth) + "\n")

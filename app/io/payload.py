@@ -43,6 +43,8 @@ class Truth:
     map_output: str | None
     map_points: np.ndarray | None
     scored_series: dict[str, np.ndarray]
+    true_along: np.ndarray | None = None
+    metadata: dict[str, Any] | None = None
 
     def scenario_data(self, scenario: str, seed: int, signals: Signals) -> ScenarioData:
         return ScenarioData(
@@ -55,6 +57,8 @@ class Truth:
             map_output=self.map_output,
             map_points=self.map_points,
             scored_series=self.scored_series,
+            true_along=self.true_along,
+            metadata=dict(self.metadata or {}),
         )
 
 
@@ -66,11 +70,15 @@ def pack_truth(data: ScenarioData) -> bytes:
         "map_inputs": list(data.map_inputs),
         "map_output": data.map_output,
         "scored": names,
+        "metadata": data.metadata,
+        "estimator_params": data.estimator_params,
     }
     arrays: dict[str, np.ndarray] = {f"s{i}": data.scored_series[n] for i, n in enumerate(names)}
     if data.true_map is not None:
         arrays["true_map"] = data.true_map.values
         arrays["map_points"] = data.scoring_points()
+    if data.true_along is not None:
+        arrays["true_along"] = data.true_along
     return blobs.pack_meta(arrays, meta)
 
 
@@ -85,4 +93,6 @@ def unpack_truth(blob: bytes) -> Truth:
         map_output=meta["map_output"],
         map_points=arrays.get("map_points"),
         scored_series={n: arrays[f"s{i}"] for i, n in enumerate(meta["scored"])},
+        true_along=arrays.get("true_along"),
+        metadata=meta.get("metadata"),
     )

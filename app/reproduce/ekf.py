@@ -13,7 +13,7 @@ from collections.abc import Collection, Sequence
 
 import numpy as np
 
-from app.cli.run import ScenarioRun, execute_scenario
+from app.cli.run import MISMATCH, ScenarioRun, execute_scenario
 from app.reproduce import paper_values as pv
 from app.reproduce.figures import curve_1d, series_panels
 from app.reproduce.report import Figure, Section, Table, Text, num
@@ -55,7 +55,7 @@ def build(seeds: Sequence[int], *, known: Collection[str] | None = None) -> Sect
     every = max(1, round(HISTORY_S * get_scenario(SCENARIO).rate_hz))
     cases: list[dict[str, ScenarioRun]] = []
     for seed in seeds:
-        data = get_scenario(SCENARIO).build(seed=seed)
+        data = get_scenario(SCENARIO).build(seed=seed, mismatch=MISMATCH.get())
         cases.append(
             {
                 name: execute_scenario(SCENARIO, name, seed=seed, data=data, every=every)

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from app.cli.run import ScenarioRun, execute_scenario
+from app.cli.run import MISMATCH, ScenarioRun, execute_scenario
 from app.reproduce import paper_values as pv
 from app.reproduce.figures import map_heatmaps, series_panels
 from app.reproduce.nox_sensor import SensorModel
@@ -87,7 +87,7 @@ class NoxCase:
 
 
 def run_case(scenario: str, seed: int) -> NoxCase:
-    data = get_scenario(scenario).build(seed=seed)
+    data = get_scenario(scenario).build(seed=seed, mismatch=MISMATCH.get())
     model = SensorModel(data)
     every = max(1, round(HISTORY_S * get_scenario(scenario).rate_hz))
     pick = max(1, round(E_M_EVERY_S / HISTORY_S))

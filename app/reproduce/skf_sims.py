@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from app.cli.run import ScenarioRun, execute_scenario
+from app.cli.run import MISMATCH, ScenarioRun, execute_scenario
 from app.reproduce import paper_values as pv
 from app.reproduce.figures import map_heatmaps, series_panels
 from app.reproduce.report import Figure, Section, Table, Text, num
@@ -52,7 +52,7 @@ class SimResult:
 
 def simulate(number: int, seed: int) -> SimResult:
     name = f"skf-sim{number}"
-    data = get_scenario(name).build(seed=seed)
+    data = get_scenario(name).build(seed=seed, mismatch=MISMATCH.get())
     assert data.true_map is not None
     truth = data.true_map.values.ravel()
     visited = (cell_visits(data.true_map, data.scoring_points()) >= 1.0).ravel()

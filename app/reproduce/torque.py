@@ -13,7 +13,7 @@ from collections.abc import Collection, Mapping, Sequence
 
 import numpy as np
 
-from app.cli.run import ScenarioRun, execute_scenario
+from app.cli.run import MISMATCH, ScenarioRun, execute_scenario
 from app.reproduce import paper_values as pv
 from app.reproduce.figures import series_panels
 from app.reproduce.report import Figure, Section, Table, Text, num
@@ -86,7 +86,7 @@ def _run(
 ) -> dict[int, dict[str, ScenarioRun]]:
     out: dict[int, dict[str, ScenarioRun]] = {}
     for seed in seeds:
-        data = get_scenario(scenario).build(seed=seed)
+        data = get_scenario(scenario).build(seed=seed, mismatch=MISMATCH.get())
         out[seed] = {
             label: execute_scenario(scenario, est, seed=seed, data=data, overrides=overrides)
             for label, est, overrides in variants

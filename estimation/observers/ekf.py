@@ -1,8 +1,10 @@
 """Joint state and MAF-map EKF on the 3-state diesel air path (docs/algorithms.md §4; EKF §2–5).
 
 Höckerdal, Frisk & Eriksson (2009), "EKF-based adaptation of look-up tables with an air
-mass-flow sensor application" — the EKF paper. The model is the simulator's own air path
-(W&E (2011), LPV (1)–(2)) with the states ``x = [p_im, p_em, ω_t]`` (Pa, Pa, rad/s), driven by
+mass-flow sensor application" — the EKF paper. The model is the W&E (2011) air path
+(LPV (1)–(2)) with the observer's own parameters (``config.model``,
+:mod:`estimation.observers.airpath_model`; under ``mismatch="nominal"`` they differ from the
+simulator's, docs/fidelity.md) with the states ``x = [p_im, p_em, ω_t]`` (Pa, Pa, rad/s), driven by
 the measured actuator positions ``ũ_egr, ũ_vgt`` [%], fuel ``u_δ`` [mg/cycle] and engine
 speed ``n_e`` [rpm]. Flows are evaluated at the EKF's own state estimate (that is what the
 EKF propagates), so nothing is computed from the measured pressures; the MAF reading
@@ -62,7 +64,6 @@ from estimation.observers.ekf_config import (
     EkfDefConfig,
     EkfMapConfig,
 )
-from estimation.plants.airpath_params import AirpathParams
 from estimation.registry import Cost, EstimatorKind, family
 from estimation.signals import Signals
 from estimation.state import EstimatorState
@@ -169,8 +170,9 @@ class EkfSettings:
     prm: np.ndarray
 
 
-def resolve_settings(kind: str, config: EkfConfig, params: AirpathParams) -> EkfSettings:
-    """Kernel arguments of variant ``kind`` from its config and the model parameters."""
+def resolve_settings(kind: str, config: EkfConfig) -> EkfSettings:
+    """Kernel arguments of variant ``kind`` from its config (noise settings and the observer's
+    own air-path model, ``config.model``)."""
     mode = _MODES[kind]
     q = list(np.square(config.sigma_state))
     p0 = list(np.square(config.sigma0_state))
@@ -199,7 +201,7 @@ def resolve_settings(kind: str, config: EkfConfig, params: AirpathParams) -> Ekf
         gate2=np.inf if config.gate_sigma is None else config.gate_sigma**2,
         max_step_s=config.max_step_s,
         theta0=theta0,
-        prm=params.to_vector(),
+        prm=config.model.vector(),
     )
 
 
@@ -307,13 +309,12 @@ class EkfObserver(ChunkedEstimator[EkfState, EkfModel]):
 
     state_class = EkfState
 
-    def __init__(self, name: str, config: EkfConfig, params: AirpathParams | None = None) -> None:
+    def __init__(self, name: str, config: EkfConfig) -> None:
         if name not in _MODES:
             raise ConfigError(f"unknown EKF variant {name!r}; choose one of {list(VARIANTS)}")
         self.name = name
         self.config = config
-        self.params = params or AirpathParams.scaled()
-        self.settings = resolve_settings(name, config, self.params)
+        self.settings = resolve_settings(name, config)
 
     def required_signals(self) -> list[str]:
         ch = self.config.channels

@@ -14,6 +14,8 @@ from typing import Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+from estimation.observers.airpath_model import AirpathModelConfig
+
 __all__ = [
     "DEFAULT_MAF_AXIS",
     "OUTPUT_NAMES",
@@ -62,14 +64,18 @@ class EkfConfig(_Strict):
     """Settings shared by the three EKF variants (standard deviations, SI units).
 
     Measurement noise of the MAF: ``R = sigma_maf_abs² + (sigma_maf_rel · y)²``; of the other
-    sensors ``sigma_p_im²``, ``sigma_p_em²``, ``(sigma_omega_t_rel · y)²`` — the defaults
-    match the simulator's :class:`~estimation.plants.airpath_sensors.NoiseSpec`. Process noise is
+    sensors ``sigma_p_im²``, ``sigma_p_em²``, ``(sigma_omega_t_rel · y)²`` — the defaults are
+    single sensor readings of 1 % (MAF), 1 kPa and 0.5 % (ω_t). Process noise is
     white with intensity ``σ²`` per second: a parameter receives ``σ² Δt`` over a sample
     period ``Δt``; for the states it is integrated along the model's dynamics
     (``∫ Φ(s) diag(σ²) Φ(s)ᵀ ds``), so the stiff ``p_im`` holds about ``σ²/(2|λ|)``.
     """
 
     channels: EkfChannels = Field(default_factory=EkfChannels)
+    model: AirpathModelConfig = Field(
+        default_factory=AirpathModelConfig,
+        description="The observer's air-path model (estimation.observers.airpath_model).",
+    )
     outputs: list[Output] = Field(
         default_factory=lambda: ["maf"],
         min_length=1,

@@ -21,10 +21,17 @@ simulation is noise-free and continuous while our data are sampled, noisy logs:
 - the gain ``L`` is designed ``structure="decoupled"`` (:mod:`estimation.observers.lmi`), so
   the ``p_im`` and MAF residuals are not fed into ``ω̂_t``, whose product ``ρ1 ω̂_t`` is the
   model flow the map is measured against;
-- ``ρ1`` comes from the intake-manifold balance (channel ``rho1``,
-  :func:`estimation.plants.airpath_rho.rho_from_measurements`), which is well conditioned; the
+- ``ρ1`` comes from the intake-manifold balance, which is well conditioned; the
   compressor-map value of LPV (3) (``rho1="rho1_compressor"``) is biased by several g/s
   under 1 kPa pressure noise.
+
+Where ρ comes from (``rho_source``): ``"model"`` computes it from the measured pressures, turbo
+speed, actuator positions, fuel and speed with the observer's own air-path model
+(:class:`~estimation.observers.airpath_model.AirpathModelConfig`, ``model``), the same model
+that gives ``a1`` and ``a2``; ``"channels"`` (default, for logs that carry an ECU's ρ) reads the
+channels ``rho1``…``rho5`` of the log. The scenarios under ``mismatch="nominal"`` use
+``"model"`` with a drawn model (docs/fidelity.md); nothing here reads the simulator's
+parameters.
 
 ``E = (0, a2 W_f, P_tη_m/(J_t ω_t))``: ``P_tη_m`` is not measured. With
 ``turbine_power="derivative"`` (default) ``E3`` is taken from the measured turbo speed,
@@ -45,6 +52,7 @@ from estimation.errors import ConfigError, ShapeError
 from estimation.estimator import Chunk, ChunkedEstimator
 from estimation.filters.config import AxisConfig
 from estimation.kernels.lpv import CONSTANT, NORMALISED, lpv_observer_kernel
+from estimation.observers.airpath_model import AirpathModelConfig, model_rho
 from estimation.observers.lmi import (
     DEFAULT_OUTPUT_SCALE,
     DEFAULT_STATE_SCALE,
@@ -77,12 +85,6 @@ def _default_axes() -> list[AxisConfig]:
     ]
 
 
-def _default_a1() -> float:
-    from estimation.plants.airpath_params import AirpathParams
-
-    return float(AirpathParams.scaled().a1)
-
-
 class LpvConfig(BaseModel):
     """Settings of the LPV observer (LPV §4: grid, ε = 0.25 / 0.11; see the module docstring
     for the adaptation gain, the gain structure and ρ1)."""
@@ -110,9 +112,18 @@ class LpvConfig(BaseModel):
     )
     eps1: float = Field(0.25, gt=0, description="ε1 of the LMI (LPV (28)).")
     eps2: float = Field(0.11, gt=0, description="ε2 of the LMI (LPV (28)).")
-    a1: float | None = Field(None, gt=0, description="R_a T_im / V_im; default: plant params.")
+    a1: float | None = Field(None, gt=0, description="R_a T_im / V_im; default: from model.")
     a2: float | None = Field(
-        None, gt=0, description="R_e T_em / V_em; default: plant params at the mean t_em_k."
+        None, gt=0, description="R_e T_em / V_em; default: from model at the mean T_em."
+    )
+    model: AirpathModelConfig = Field(
+        default_factory=AirpathModelConfig,
+        description="The observer's air-path model (a1, a2 and, with rho_source='model', ρ).",
+    )
+    rho_source: Literal["channels", "model"] = Field(
+        "channels",
+        description="ρ from the log's channels rho1…rho5 ('channels') or computed with the "
+        "observer's model from the measured signals ('model').",
     )
     rho_min: list[float] | None = Field(None, description="ρ box lower bounds; default: data.")
     rho_max: list[float] | None = Field(None, description="ρ box upper bounds; default: data.")
@@ -136,7 +147,13 @@ class LpvConfig(BaseModel):
     omega_t: str = Field("omega_t_rad_s", description="Turbocharger speed [rad/s].")
     maf: str = Field("maf_kg_s", description="MAF sensor reading W_c + ΔW_c [kg/s].")
     fuel_flow: str = Field("w_f_kg_s", description="Fuel mass flow W_f [kg/s].")
-    t_em: str | None = Field("t_em_k", description="Exhaust temperature [K] for the default a2.")
+    t_em: str | None = Field(
+        "t_em_k", description="Exhaust temperature [K] for the default a2 (rho_source='channels')."
+    )
+    u_egr: str = Field("u_egr_pos_pct", description="EGR valve position [%] (rho_source='model').")
+    u_vgt: str = Field("u_vgt_pos_pct", description="VGT position [%] (rho_source='model').")
+    fuel: str = Field("fuel_mg_per_cycle", description="Fuel [mg/cycle] (rho_source='model').")
+    speed: str = Field("speed_rpm", description="Engine speed [rpm] (rho_source='model').")
 
     @model_validator(mode="after")
     def _check(self) -> Self:
@@ -229,22 +246,52 @@ class LpvObserver(ChunkedEstimator[LpvState, LpvPrepared]):
     def required_signals(self) -> list[str]:
         c = self.config
         names = [a.name for a in c.axes] + [c.p_im, c.omega_t, c.maf, c.fuel_flow]
-        return names + self.rho_channels()
+        return list(dict.fromkeys(names + self._scheduling_inputs()))
 
     def signal_roles(self) -> dict[str, list[str]]:
         c = self.config
         return {
             "axis": [a.name for a in c.axes],
             "output": [c.p_im, c.omega_t, c.maf],
-            "input": [c.fuel_flow, *self.rho_channels()],
+            "input": [c.fuel_flow, *self._scheduling_inputs()],
         }
 
     def output_names(self) -> tuple[str, ...]:
         return tuple(OUTPUT_UNITS)
 
     def rho_channels(self) -> list[str]:
-        """The five channels read as ρ1…ρ5."""
+        """The five channels read as ρ1…ρ5 (``rho_source="channels"``)."""
         return [self.config.rho1, *RHO_CHANNELS[1:]]
+
+    def _model_columns(self) -> list[str]:
+        c = self.config
+        return [c.p_im, c.p_em or "p_em_pa", c.omega_t, c.u_egr, c.u_vgt, c.fuel, c.speed]
+
+    def _scheduling_inputs(self) -> list[str]:
+        if self.config.rho_source == "model":
+            return self._model_columns()
+        return self.rho_channels()
+
+    def scheduling(self, signals: Signals) -> tuple[np.ndarray, float]:
+        """ρ (n, 5) and the mean exhaust temperature [K] the observer runs on.
+
+        ``rho_source="model"``: both from the observer's model
+        (:func:`~estimation.observers.airpath_model.model_rho`), ρ1 by the manifold balance or,
+        with ``rho1="rho1_compressor"``, the compressor map; ``"channels"``: the log's ρ
+        channels and its ``t_em`` channel (700 K without one).
+        """
+        c = self.config
+        if c.rho_source == "model":
+            signals.require(self._model_columns())
+            cols = tuple(signals[name] for name in self._model_columns())
+            rho, rho1_compressor, t_em = model_rho(cols, signals.time, c.model)
+            if c.rho1 == "rho1_compressor":
+                rho[:, 0] = rho1_compressor
+            return np.ascontiguousarray(rho), float(np.mean(t_em))
+        signals.require(self.rho_channels())
+        rho = np.ascontiguousarray(signals.stack(self.rho_channels()))
+        t_em = float(np.mean(signals[c.t_em])) if c.t_em and c.t_em in signals else 700.0
+        return rho, t_em
 
     def prepare(self, signals: Signals, accept: np.ndarray | None = None) -> LpvPrepared:
         c = self.config
@@ -254,7 +301,7 @@ class LpvObserver(ChunkedEstimator[LpvState, LpvPrepared]):
         if mask.shape != (n,):
             raise ShapeError(f"accept mask has shape {mask.shape}, the log has {n} samples")
         idx, w = self.grid.regressor(signals.stack([a.name for a in c.axes]))
-        rho = np.ascontiguousarray(signals.stack(self.rho_channels()))
+        rho, t_em = self.scheduling(signals)
         if c.adapt_only_with_flow:
             mask = mask & (rho[:, 0] > 0.0)
         omega = signals[c.omega_t]
@@ -262,7 +309,7 @@ class LpvObserver(ChunkedEstimator[LpvState, LpvPrepared]):
         t = signals.time
         h = np.zeros(n)
         h[1:] = np.diff(t)
-        a2 = self._a2(signals)
+        a2 = self._a2(t_em)
         e = np.zeros((n, 3))
         e[:, 1] = a2 * signals[c.fuel_flow]
         if c.turbine_power == "derivative":
@@ -273,30 +320,24 @@ class LpvObserver(ChunkedEstimator[LpvState, LpvPrepared]):
         return LpvPrepared(idx, w, y, rho, e, h, mask, t, x0)
 
     def _a1(self) -> float:
-        return self.config.a1 if self.config.a1 is not None else _default_a1()
+        return self.config.a1 if self.config.a1 is not None else self.config.model.a1()
 
-    def _a2(self, signals: Signals) -> float:
-        c = self.config
-        if c.a2 is not None:
-            return c.a2
-        from estimation.plants.airpath_params import AirpathParams
-
-        t_em = float(np.mean(signals[c.t_em])) if c.t_em and c.t_em in signals else 700.0
-        return float(AirpathParams.scaled().a2(t_em))
+    def _a2(self, t_em_k: float) -> float:
+        return self.config.a2 if self.config.a2 is not None else self.config.model.a2(t_em_k)
 
     def design_gain(self, signals: Signals) -> GainDesign:
         """Solve the LMIs on the configured ρ box, or the log's (:func:`data_rho_box`)."""
         c = self.config
+        rho, t_em = self.scheduling(signals)
         if c.rho_min is not None and c.rho_max is not None:
             lo, hi = np.array(c.rho_min), np.array(c.rho_max)
         else:
-            signals.require(self.rho_channels())
-            lo, hi = data_rho_box(signals.stack(self.rho_channels()), rho4_floor=c.rho4_floor)
+            lo, hi = data_rho_box(rho, rho4_floor=c.rho4_floor)
         return synthesize_gain(
             lo,
             hi,
             self._a1(),
-            self._a2(signals),
+            self._a2(t_em),
             eps1=c.eps1,
             eps2=c.eps2,
             structure=c.gain_structure,

@@ -9,6 +9,7 @@ applies both.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -60,11 +61,14 @@ class MafErrorSpec:
 
     ``kind``: ``"additive_2d"`` (table over ``(fuel_mg_per_cycle, speed_rpm)``, values in
     kg/s, LPV (7)), ``"relative_1d"`` (table over ``maf_kg_s``, values ``q`` dimensionless,
-    EKF (6)) or ``"none"``.
+    EKF (6)) or ``"none"``. With ``function`` (points ``(n, d)`` in the table's axis order →
+    values) the plant evaluates it off-grid instead of interpolating ``table``, which then
+    only describes the truth at the nodes (:mod:`estimation.truth_maps`, docs/fidelity.md).
     """
 
     kind: Literal["additive_2d", "relative_1d", "none"]
     table: Table | None = None
+    function: Callable[[np.ndarray], np.ndarray] | None = None
 
     def __post_init__(self) -> None:
         if self.kind == "none":
@@ -124,12 +128,17 @@ class MafErrorSpec:
         if self.kind == "none":
             return np.zeros_like(w)
         assert self.table is not None
+        evaluate = self.table.evaluate if self.function is None else self.function
         if self.kind == "additive_2d":
-            return self.table.evaluate(np.column_stack([fuel_mg_per_cycle, speed_rpm]))
-        return self.table.evaluate(w[:, None]) * w
+            return evaluate(np.column_stack([fuel_mg_per_cycle, speed_rpm]))
+        return evaluate(w[:, None]) * w
 
     def to_dict(self) -> dict[str, Any]:
-        return {"kind": self.kind, "table": None if self.table is None else self.table.to_dict()}
+        return {
+            "kind": self.kind,
+            "table": None if self.table is None else self.table.to_dict(),
+            "off_grid": self.function is not None,
+        }
 
 
 @dataclass(frozen=True, slots=True)

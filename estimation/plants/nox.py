@@ -39,6 +39,7 @@ them); an estimator applies the delay itself (SKF (23)).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -267,6 +268,7 @@ def simulate_nox(
     seed: int,
     params: NoxParams = DEFAULT_NOX_PARAMS,
     base_map: Table | None = None,
+    base_function: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> tuple[Signals, NoxTruth]:
     """Simulate the measured NOx sensor signal for an operating-point trajectory.
 
@@ -282,6 +284,9 @@ def simulate_nox(
     params : :class:`NoxParams`.
     base_map : age-0 true map over axes (``speed_rpm``, ``fuel_mg_per_stroke``);
         default :func:`nox_base_map`.
+    base_function : if given, the age-0 truth evaluated off-grid at the operating points
+        ``(n, 2)`` instead of interpolating ``base_map`` (which then gives the truth at the
+        nodes only; :mod:`estimation.truth_maps`, docs/fidelity.md).
 
     Returns
     -------
@@ -326,9 +331,8 @@ def simulate_nox(
             )
 
     U = inputs.stack([SPEED_CHANNEL, FUEL_CHANNEL])
-    x = (1.0 + params.drift_gain_per_h * age_h) * base_map.evaluate(
-        U
-    ) + params.drift_offset_ppm_per_h * age_h
+    base = base_map.evaluate(U) if base_function is None else base_function(U)
+    x = (1.0 + params.drift_gain_per_h * age_h) * base + params.drift_offset_ppm_per_h * age_h
 
     tau = delay_samples(params.delay_s, ts)
     y_init = float(x[0]) if params.sensor_initial_ppm is None else float(params.sensor_initial_ppm)

@@ -88,10 +88,8 @@ from estimation.plants.torque_params import (
     validate_params,
 )
 from estimation.signals import Signals
+from estimation.torque.channels import AIR_CHANNEL, LOAD_CHANNEL, SPEED_CHANNEL
 
-SPEED_CHANNEL = "speed_rpm"
-LOAD_CHANNEL = "load_torque_nm"
-AIR_CHANNEL = "air_mass_flow_kg_s"
 THROTTLE_CHANNEL = "throttle_deg"
 MANIFOLD_CHANNEL = "manifold_pressure_pa"
 SPEED_REF_CHANNEL = "speed_setpoint_rpm"

@@ -26,12 +26,12 @@ PRM = AirpathParams.scaled().to_vector()
 
 @pytest.fixture(scope="module")
 def short():
-    return get_scenario("maf-1d-whtc").build(seed=0, duration_s=30.0)
+    return get_scenario("maf-1d-whtc").build(seed=0, duration_s=30.0, mismatch="none")
 
 
 @pytest.fixture(scope="module")
 def medium():
-    return get_scenario("maf-1d-whtc").build(seed=0, duration_s=150.0)
+    return get_scenario("maf-1d-whtc").build(seed=0, duration_s=150.0, mismatch="none")
 
 
 def _inputs(signals: Signals) -> np.ndarray:
@@ -448,11 +448,13 @@ def test_registered_and_runnable_on_the_maf_scenarios() -> None:
     assert get_scenario("maf-whtc").default_config("ekf-aug") == {}
     with pytest.raises(ConfigError, match="does not apply"):
         get_scenario("maf-whtc").default_config("ekf-map")
-    result = run_scenario("maf-1d-whtc", "ekf-map", duration_s=120.0)
+    # the perfect-model case; under mismatch="nominal" see tests/estimation/test_heldout.py
+    result = run_scenario("maf-1d-whtc", "ekf-map", duration_s=120.0, mismatch="none")
     metrics = result["metrics"]
     assert 0 < metrics["rmse"] < 1e-3  # W_c against the truth, kg/s
     assert {"mean_relative_error", "map_rmse", "output_rmse"} <= set(metrics)
-    assert run_scenario("maf-1d-whtc", "ekf-def", duration_s=120.0)["metrics"]["rmse"] > 0
+    def_run = run_scenario("maf-1d-whtc", "ekf-def", duration_s=120.0, mismatch="none")
+    assert def_run["metrics"]["rmse"] > 0
 
 
 # --------------------------------------------------------------------------- EKF Table 1
@@ -476,9 +478,11 @@ def _table1(data) -> dict[str, dict[str, float]]:
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_table1_pattern(seed: int) -> None:
-    """EKF Table 1 on maf-1d-whtc: Map ≈ Aug in state and output errors, Def clearly larger,
-    and Map recovers the 1-D correction map along the trajectory."""
-    r = _table1(get_scenario("maf-1d-whtc").build(seed=seed))
+    """EKF Table 1 on maf-1d-whtc with the perfect model (mismatch="none", single readings):
+    Map ≈ Aug in state and output errors, Def clearly larger, and Map recovers the 1-D
+    correction map along the trajectory. Under mismatch="nominal" the pattern does not hold
+    (docs/fidelity.md#ekf; tests/estimation/test_heldout_claims.py)."""
+    r = _table1(get_scenario("maf-1d-whtc").build(seed=seed, mismatch="none"))
     d, a, m = r["ekf-def"], r["ekf-aug"], r["ekf-map"]
     for key in ("w_c_kg_s", "p_im_pa", "omega_t_rad_s"):
         assert 0.7 < m[key] / a[key] < 1.4, (key, r)

@@ -155,7 +155,7 @@ def _reference_run(state, prep, *, gamma, adaptation):
 @pytest.mark.parametrize("adaptation", ["normalised", "constant"])
 def test_kernel_matches_the_slow_dense_reference(adaptation):
     """A real scenario segment: ρ beyond the box (clipped), rejected samples, both gains."""
-    sig = get_scenario("maf-whtc").build(seed=0, duration_s=40.0).signals
+    sig = get_scenario("maf-whtc").build(seed=0, duration_s=40.0, mismatch="none").signals
     gamma = 10.0 if adaptation == "normalised" else 200.0
     obs = LpvObserver(LpvConfig(adaptation=adaptation, gamma=gamma))
     n = len(sig)
@@ -241,7 +241,7 @@ def test_config_errors_name_the_problem():
 
 @cache
 def _scenario(name: str, seed: int) -> ScenarioData:
-    return get_scenario(name).build(seed=seed, duration_s=None)
+    return get_scenario(name).build(seed=seed, duration_s=None, mismatch="none")
 
 
 def _mre(data: ScenarioData, config: dict) -> float:
@@ -252,7 +252,9 @@ def _mre(data: ScenarioData, config: dict) -> float:
 @pytest.mark.parametrize("seed", [0, 1, 2])
 @pytest.mark.parametrize("name", ["maf-whtc", "maf-ftp75"])
 def test_map_reaches_the_papers_mean_relative_error(name, seed):
-    """LPV §4: 10.41 % (ETC part 1; WHTC here) and 5.28 % (FTP-75), every seed."""
+    """LPV §4: 10.41 % (ETC part 1; WHTC here) and 5.28 % (FTP-75), every seed, whole cycles,
+    with the perfect model (mismatch="none"). Held-out seeds under nominal mismatch and the
+    papers' segments: tests/estimation/test_heldout_claims.py, docs/fidelity.md#held-out."""
     data = _scenario(name, seed)
     config = get_scenario(name).default_config("lpv")
     assert _mre(data, config) <= TARGETS[name]
@@ -285,16 +287,15 @@ def _with_noise(name: str, seed: int, noise) -> ScenarioData:
     return dataclasses.replace(base, signals=signals)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="single sensor readings miss LPV §4: docs/estimators.md#dev-lpv-single-readings",
-)
 @pytest.mark.parametrize("name", ["maf-whtc", "maf-ftp75"])
 def test_single_sensor_readings_miss_the_papers_accuracy(name):
+    """With single 1 kPa readings instead of the mean of ten, even the perfect model misses
+    LPV §4 (docs/estimators.md#dev-lpv-single-readings); the held-out figures under nominal
+    mismatch are in docs/fidelity.md#held-out."""
     from estimation.plants.airpath_sensors import NoiseSpec
 
     data = _with_noise(name, 0, NoiseSpec(averaged_readings=1))
-    assert _mre(data, {}) <= TARGETS[name]
+    assert _mre(data, {}) > TARGETS[name]
 
 
 def test_compressor_map_rho1_is_too_ill_conditioned_for_noisy_pressures():

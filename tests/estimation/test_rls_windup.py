@@ -19,7 +19,7 @@ WOUND_UP = {"forgetting": 0.995, "limit": "none"}
 
 @pytest.fixture(scope="module")
 def nedc():  # type: ignore[no-untyped-def]
-    return get_scenario("nox-nedc").build(seed=0)
+    return get_scenario("nox-nedc").build(seed=0, mismatch="none")
 
 
 def test_nedc_dwells_on_constant_regressors(nedc) -> None:  # type: ignore[no-untyped-def]
