@@ -5,6 +5,13 @@
 ``idx, w`` are the sparse regressor rows (:meth:`estimation.table.Grid.regressor`) already
 aligned with ``y`` (a sensor delay is applied by the caller); ``status`` is 0 for an accepted
 sample, 1 for one rejected by the ``accept`` mask, 2 for one rejected by the innovation gate.
+Given ``s_out`` (length of the chunk), a run function also writes each sample's innovation
+variance there, in the output's unit squared (docs/tuning.md): ``hᵀPh + σv²`` for KF and
+SKF, ``σv²·(hᵀPh + 1)`` for RLS, ``σv²`` for SSKF and NLMS (what their gates test against).
+
+Tables of 1, 2 and 3 dimensions (2, 4, 8 corners) run kernels compiled for that corner count
+(:mod:`estimation.kernels.specialise`); other dimensions, or ``specialised=False``, run the
+generic kernels. Both give bit-identical results.
 """
 
 from __future__ import annotations
@@ -20,6 +27,7 @@ from estimation.filters.state import FilterState, KfState, LocalState, ThetaStat
 from estimation.kernels.gain_only import nlms_kernel, sskf_kernel
 from estimation.kernels.kalman import REJECTED_GATE, REJECTED_MASK, kf_kernel
 from estimation.kernels.local import local_kernel
+from estimation.kernels.specialise import corner_token, sensor_token
 
 RunResult = tuple[FilterState, np.ndarray, np.ndarray]
 
@@ -70,6 +78,9 @@ def kf_run(
     y: np.ndarray,
     accept: np.ndarray,
     settings: FilterSettings,
+    s_out: np.ndarray | None = None,
+    *,
+    specialised: bool = True,
 ) -> RunResult:
     """Full KF over a chunk (SKF §4.4, docs/algorithms.md §2.1; kernel :func:`kf_kernel`)."""
     x = np.append(state.theta, state.y_m) if state.y_m is not None else state.theta.copy()
@@ -93,6 +104,8 @@ def kf_run(
         settings.sigma_f2,
         yhat,
         status,
+        _variances(y, s_out),
+        corner_token(idx.shape[1], specialised=specialised),
     )
     p = state.theta.size
     y_m = float(x[p]) if state.y_m is not None else None
@@ -106,8 +119,10 @@ def _local_run(
     y: np.ndarray,
     accept: np.ndarray,
     settings: FilterSettings,
+    s_out: np.ndarray | None = None,
     *,
     rls: bool,
+    specialised: bool = True,
 ) -> RunResult:
     theta, var, last = state.theta.copy(), state.var.copy(), state.last.copy()
     active, Pa = state.active.copy(), state.P_active.copy()
@@ -133,11 +148,13 @@ def _local_run(
         settings.limit,
         settings.locked,
         settings.gate2,
-        settings.has_sensor and not rls,
         settings.lag,
         settings.sigma_f2,
         yhat,
         status,
+        _variances(y, s_out),
+        corner_token(idx.shape[1], specialised=specialised),
+        sensor_token(settings.has_sensor and not rls),
     )
     y_m = float(ym[0]) if state.y_m is not None else None
     new = _advance(
@@ -153,9 +170,12 @@ def skf_run(
     y: np.ndarray,
     accept: np.ndarray,
     settings: FilterSettings,
+    s_out: np.ndarray | None = None,
+    *,
+    specialised: bool = True,
 ) -> RunResult:
     """Simplified KF over a chunk (SKF §4.7 Algorithm 1, docs/algorithms.md §2.2)."""
-    return _local_run(state, idx, w, y, accept, settings, rls=False)
+    return _local_run(state, idx, w, y, accept, settings, s_out, rls=False, specialised=specialised)
 
 
 def rls_run(
@@ -165,9 +185,12 @@ def rls_run(
     y: np.ndarray,
     accept: np.ndarray,
     settings: FilterSettings,
+    s_out: np.ndarray | None = None,
+    *,
+    specialised: bool = True,
 ) -> RunResult:
     """Local RLS with forgetting λ on the active cells over a chunk (docs/algorithms.md §2.4)."""
-    return _local_run(state, idx, w, y, accept, settings, rls=True)
+    return _local_run(state, idx, w, y, accept, settings, s_out, rls=True, specialised=specialised)
 
 
 def sskf_run(
@@ -177,6 +200,9 @@ def sskf_run(
     y: np.ndarray,
     accept: np.ndarray,
     settings: FilterSettings,
+    s_out: np.ndarray | None = None,
+    *,
+    specialised: bool = True,
 ) -> RunResult:
     """Steady-state KF over a chunk (SKF §4.5 (15)–(16), docs/algorithms.md §2.3)."""
     theta = state.theta.copy()
@@ -193,7 +219,10 @@ def sskf_run(
         settings.gate2,
         yhat,
         status,
+        corner_token(idx.shape[1], specialised=specialised),
     )
+    if s_out is not None:
+        s_out[:] = settings.sigma_v2
     return _advance(state, status, theta=theta), yhat, status
 
 
@@ -204,6 +233,9 @@ def nlms_run(
     y: np.ndarray,
     accept: np.ndarray,
     settings: FilterSettings,
+    s_out: np.ndarray | None = None,
+    *,
+    specialised: bool = True,
 ) -> RunResult:
     """Normalised LMS over a chunk (docs/algorithms.md §2.4)."""
     theta = state.theta.copy()
@@ -221,7 +253,10 @@ def nlms_run(
         settings.gate2,
         yhat,
         status,
+        corner_token(idx.shape[1], specialised=specialised),
     )
+    if s_out is not None:
+        s_out[:] = settings.sigma_v2
     return _advance(state, status, theta=theta), yhat, status
 
 
@@ -242,8 +277,13 @@ def run_chunk(
     y: np.ndarray,
     accept: np.ndarray | None,
     settings: FilterSettings,
+    *,
+    s_out: np.ndarray | None = None,
+    specialised: bool = True,
 ) -> RunResult:
-    """Dispatch to the run function of ``state.kind`` after checking the chunk's arrays."""
+    """Dispatch to the run function of ``state.kind`` after checking the chunk's arrays
+    (``s_out``: where to write the innovation variances; ``specialised=False``: the generic
+    kernels whatever the dimension, for comparisons; module docstring)."""
     n = y.shape[0]
     if idx.shape != w.shape or idx.shape[0] != n:
         raise ShapeError(f"regressor shapes {idx.shape}, {w.shape} do not fit {n} samples")
@@ -253,6 +293,8 @@ def run_chunk(
         accept = np.ones(n, dtype=np.bool_)
     elif accept.shape != (n,):
         raise ShapeError(f"accept mask has shape {accept.shape}, expected ({n},)")
+    if s_out is not None and (s_out.shape != (n,) or s_out.dtype != np.float64):
+        raise ShapeError(f"s_out must be float64 of shape ({n},), got {s_out.shape}")
     return RUN_FUNCTIONS[state.kind](
         state,
         np.ascontiguousarray(idx, dtype=np.int64),
@@ -260,6 +302,8 @@ def run_chunk(
         np.ascontiguousarray(y, dtype=np.float64),
         np.ascontiguousarray(accept, dtype=np.bool_),
         settings,
+        s_out,
+        specialised=specialised,
     )
 
 
@@ -281,6 +325,11 @@ def variance(state: FilterState, settings: FilterSettings) -> np.ndarray | None:
                 var[j] = state.P_active[c, c]
         return var
     return None
+
+
+def _variances(y: np.ndarray, s_out: np.ndarray | None) -> np.ndarray:
+    """Where a kernel writes its innovation variances: ``s_out``, or scratch if not wanted."""
+    return np.empty(y.shape[0]) if s_out is None else s_out
 
 
 def _outputs(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -8,6 +8,7 @@ import numba as nb
 import numpy as np
 
 from estimation.kernels.kalman import ACCEPTED, REJECTED_GATE, REJECTED_MASK
+from estimation.kernels.specialise import fixed_or
 
 
 @nb.njit(cache=True, inline="always")
@@ -33,6 +34,7 @@ def sskf_kernel(
     gate2: float,
     yhat_out: np.ndarray,
     status_out: np.ndarray,
+    corners: tuple,
 ) -> None:
     """SSKF over ``n`` samples (SKF §4.5, (15)–(16), Algorithm 2).
 
@@ -40,10 +42,11 @@ def sskf_kernel(
     gain of corner ``c`` is the product over axes of ``k(η_a)`` (lower breakpoint) or
     ``k(1−η_a)`` (upper), the paper's product form (15), with ``r = σv² / σ̄w²`` where ``σ̄w²``
     is the weight-averaged process variance of the active cells. Locked cells get zero gain.
-    The innovation gate uses ``s = σv²``.
+    The innovation gate uses ``s = σv²``. ``corners`` is the size token of
+    :mod:`estimation.kernels.specialise` (``2^d`` or generic).
     """
     n = y.shape[0]
-    nc = idx.shape[1]
+    nc = fixed_or(corners, idx.shape[1])
     d = 0
     while (1 << d) < nc:
         d += 1
@@ -99,13 +102,15 @@ def nlms_kernel(
     gate2: float,
     yhat_out: np.ndarray,
     status_out: np.ndarray,
+    corners: tuple,
 ) -> None:
     """Normalised LMS (docs/algorithms.md §2.4): ``θ_c += μ q_c e / (qᵀq + ε)`` for each unlocked
     active cell ("distribute the error over the active cells"). ``qᵀq`` sums over every active
     cell, locked ones included, so a lone unlocked corner with a tiny weight takes a share of
-    the error, not all of it divided by its weight. The innovation gate uses ``s = σv²``."""
+    the error, not all of it divided by its weight. The innovation gate uses ``s = σv²``.
+    ``corners`` is the size token of :mod:`estimation.kernels.specialise`."""
     n = y.shape[0]
-    nc = idx.shape[1]
+    nc = fixed_or(corners, idx.shape[1])
     for k in range(n):
         yhat = 0.0
         qq = 0.0

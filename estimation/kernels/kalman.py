@@ -9,6 +9,8 @@ per sample, never O(p³).
 import numba as nb
 import numpy as np
 
+from estimation.kernels.specialise import fixed_or
+
 ACCEPTED = 0
 REJECTED_MASK = 1
 REJECTED_GATE = 2
@@ -46,6 +48,8 @@ def kf_kernel(
     sigma_f2: float,
     yhat_out: np.ndarray,
     status_out: np.ndarray,
+    s_out: np.ndarray,
+    corners: tuple,
 ) -> None:
     """Run the full KF over ``n`` samples, updating ``x`` and ``P`` in place.
 
@@ -61,12 +65,14 @@ def kf_kernel(
     * update (SKF (7)): ``g = Ph/s``, ``x ← x + g e``, ``P ← P − (Ph)(Ph)ᵀ/s``.
 
     ``sigma_w2`` must already be zero on locked cells. Writes the prediction ``ŷ`` and the
-    sample status (0 accepted, 1 rejected by mask, 2 rejected by gate) to the out arrays.
+    sample status (0 accepted, 1 rejected by mask, 2 rejected by gate) and the innovation
+    variance ``s`` (for the innovation statistics of docs/tuning.md) to the out arrays.
+    ``corners`` is the size token of :mod:`estimation.kernels.specialise` (``2^d`` or generic).
     """
     n = y.shape[0]
     p = sigma_w2.shape[0]
     m = x.shape[0]
-    nc = idx.shape[1]
+    nc = fixed_or(corners, idx.shape[1])
     ym = m - 1
     b = 1.0 - lag
     v = np.empty(m)
@@ -126,6 +132,7 @@ def kf_kernel(
             for c in range(nc):
                 s += wu[c] * v[idx[k, c]]
         yhat_out[k] = yhat
+        s_out[k] = s
         if not accept[k]:
             status_out[k] = REJECTED_MASK
             continue

@@ -15,6 +15,7 @@ import numba as nb
 import numpy as np
 
 from estimation.kernels.kalman import ACCEPTED, REJECTED_GATE, REJECTED_MASK, _cap_row_col
+from estimation.kernels.specialise import fixed_or
 
 
 @nb.njit(cache=True, inline="always")
@@ -32,6 +33,8 @@ def _switch_active(
     has_sensor: bool,
     pos_old: np.ndarray,
     scratch: np.ndarray,
+    nc: int,
+    na: int,
 ) -> None:
     """Move the local system from the elements ``active`` to ``idx[k]`` at step ``k_step``.
 
@@ -41,8 +44,6 @@ def _switch_active(
     the covariance of a pair is kept only if both elements are in the old and the new set
     (SKF §5.2). ``y_M`` (last row/column) is always active.
     """
-    nc = active.shape[0]
-    na = Pa.shape[0]
     for c in range(nc):
         pos_old[c] = -1
     for c2 in range(nc):
@@ -106,11 +107,13 @@ def local_kernel(
     limit: bool,
     locked: np.ndarray,
     gate2: float,
-    has_sensor: bool,
     lag: float,
     sigma_f2: float,
     yhat_out: np.ndarray,
     status_out: np.ndarray,
+    s_out: np.ndarray,
+    corners: tuple,
+    sensor: tuple,
 ) -> None:
     """Run the local filter over ``n`` samples, updating the state arrays in place.
 
@@ -125,10 +128,17 @@ def local_kernel(
     * innovation ``e = y − ŷ``, ``s = hᵀ Pa h + r`` (r = σv² for SKF, 1 for RLS);
       reject if masked or ``e² > gate2 · gate_scale · s``;
     * update ``g = Pa h / s``, ``θ_A += g e``, ``Pa ← Pa − (Pa h)(Pa h)ᵀ / s``.
+
+    ``s_out[k]`` is the innovation variance in the output's unit squared, ``gate_scale · s``
+    (SKF: ``s``; RLS: ``σv² s``), for the innovation statistics of docs/tuning.md.
+
+    ``corners`` and ``sensor`` are size tokens (:mod:`estimation.kernels.specialise`): the
+    corner count ``2^d`` (or generic) and one element for ``y_M`` if the sensor is modelled.
     """
     n = y.shape[0]
-    nc = idx.shape[1]
-    na = Pa.shape[0]
+    nc = fixed_or(corners, idx.shape[1])
+    has_sensor = len(sensor) > 0
+    na = nc + len(sensor)
     s_ = na - 1
     b = 1.0 - lag
     inv_forget = 1.0 / forget
@@ -157,6 +167,8 @@ def local_kernel(
                 has_sensor,
                 pos_old,
                 scratch,
+                nc,
+                na,
             )
         for c in range(nc):
             q[c] = 0.0 if locked[active[c]] else w[k, c]
@@ -210,6 +222,7 @@ def local_kernel(
             for c in range(nc):
                 s += q[c] * v[c]
         yhat_out[k] = yhat
+        s_out[k] = gate_scale * s
         if not accept[k]:
             status_out[k] = REJECTED_MASK
             continue
