@@ -30,9 +30,11 @@ from app.domain import Dataset, ResumePoint, Run, Series, SeriesRole
 from app.io.decimate import stride_decimate
 from app.io.payload import Truth
 from app.runs.gates import GateResult, cell_counts, nearest_cell
+from estimation.errors import EstimationError
 from estimation.estimator import Snapshot
+from estimation.holdout import holdout_error
 from estimation.metrics import score_run
-from estimation.registry import EstimatorSpec
+from estimation.registry import EstimatorKind, EstimatorSpec
 from estimation.signals import Signals
 from estimation.table import Table
 
@@ -222,8 +224,9 @@ class RunResults:
     # -- metrics ------------------------------------------------------------------------------
 
     def metrics(self, snap: Snapshot, run_s: float) -> dict[str, float | None]:
-        """The run's final metrics: timing, counts, ``output_rmse``, coverage and, on a
-        simulated dataset, the scores against its truth (:func:`score_run`)."""
+        """The run's final metrics: timing, counts, ``output_rmse``, coverage, on a
+        simulated dataset the scores against its truth (:func:`score_run`) and, for a map
+        filter, the truth-free ones (:meth:`holdout_metrics`)."""
         truth = None
         if self.truth is not None:
             truth = self.truth.scenario_data(
@@ -240,7 +243,26 @@ class RunResults:
         if snap.table is not None and self.visits is not None:
             metrics["coverage"] = float(np.mean(self.visits >= 1.0))
         metrics |= scored
+        metrics |= self.holdout_metrics()
         return {k: finite_or_none(v) for k, v in metrics.items()}
+
+    def holdout_metrics(self) -> dict[str, float]:
+        """A map filter's held-out prediction error and innovation statistics
+        (:mod:`estimation.holdout`, docs/tuning.md): the run's estimator and config refitted
+        on the first 70 % of the log, its frozen map and the base map scored on the rest
+        (``holdout:*``, in the output's unit) and the NIS of that fit (``nis:*``,
+        dimensionless). Empty for other estimators, or when the log is too short to split.
+        """
+        if self.spec.kind != EstimatorKind.MAP_FILTER:
+            return {}
+        accept = None if self.gates is None else self.gates.accept
+        try:
+            result = holdout_error(
+                self.spec.name, self.run.estimator_config, self.signals, accept=accept
+            )
+        except EstimationError:
+            return {}
+        return result.metrics()
 
 
 def finite_or_none(value: Any) -> float | None:

@@ -1,0 +1,173 @@
+"""The innovation sequence of a map filter and its statistics: a consistency check without truth.
+
+A map filter (docs/algorithms.md §2) predicts each measurement before it uses it. Its
+innovation and innovation variance at kernel step ``k`` are (docs/tuning.md#innovations)::
+
+    e_k = y_k − ŷ_k                      ŷ_k = ψ_kᵀθ_k⁻  (or the sensor state y_M,k⁻)
+    S_k = h_kᵀ P_k⁻ h_k + σv²            (KF, SKF; RLS: σv²·(h_kᵀP_k⁻h_k + 1); SSKF, NLMS: σv²)
+
+If the filter's model and its noise settings σw, σv (σf) are right, the ``e_k`` are zero-mean,
+white and ``e_k ~ N(0, S_k)`` (Bar-Shalom, Li & Kirubarajan, *Estimation with Applications
+to Tracking and Navigation*, 2001, §5.4: the innovation-based consistency tests). Hence:
+
+* the normalised innovation squared ``NIS_k = e_k²/S_k`` is χ²(1): 95 % of the samples fall
+  in ``[χ²₁(0.025), χ²₁(0.975)] = [0.00098, 5.02]``;
+* the time-averaged NIS over ``N`` samples, ``N · mean(NIS) ~ χ²(N)``, lies in
+  ``[χ²_N(0.025)/N, χ²_N(0.975)/N]`` with 95 % probability (the band tightens around 1 as
+  ``N`` grows); mean NIS above the band says the filter's ``S`` is too small (σw or σv too
+  low, or the model wrong), below it says ``S`` is too large;
+* the innovation log-likelihood of the log, the objective of ``mapwise tune``
+  (:mod:`estimation.tuning`), is ``ℓ = Σ_k −½ (log 2πS_k + e_k²/S_k)``.
+
+Only accepted kernel steps count (status 0): samples masked by a gate or rejected by the
+innovation gate were not used by the filter and are left out. The χ² quantiles come from
+``scipy.stats.chi2`` (scipy ships with the solvers mapwise depends on).
+
+The run goes through the registry (:func:`estimation.registry.get_spec`) and the compiled
+kernels (:func:`estimation.filters.functions.run_chunk`), one call over the whole log.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from pydantic import BaseModel
+
+from estimation.errors import ConfigError
+from estimation.filters.estimator import Prepared, TableFilter
+from estimation.filters.functions import run_chunk
+from estimation.filters.state import FilterState
+from estimation.registry import EstimatorKind, get_spec
+from estimation.signals import Signals
+
+BAND_PROBABILITY = 0.95
+"""Probability mass of the χ² bands (two-sided, 2.5 % in each tail)."""
+
+STATUS_ACCEPTED = 0
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Innovations:
+    """A map filter's pass over a log: per kernel step ``e``, ``S`` and the status code.
+
+    Kernel step ``i`` pairs the measurement at log sample ``i + delay`` with the operating
+    point at log sample ``i``. ``state`` is the filter state after the last step and
+    ``estimator`` the filter that ran (its grid and initial map ``theta0``).
+    """
+
+    e: np.ndarray
+    s: np.ndarray
+    status: np.ndarray
+    state: FilterState
+    estimator: TableFilter
+    prepared: Prepared
+
+    @property
+    def accepted(self) -> np.ndarray:
+        return (self.status == STATUS_ACCEPTED) & np.isfinite(self.e) & (self.s > 0)
+
+
+def map_filter(name: str, config: BaseModel | dict[str, Any]) -> TableFilter:
+    """The map filter ``name`` built from ``config`` by its registry spec."""
+    spec = get_spec(name)
+    if spec.kind != EstimatorKind.MAP_FILTER:
+        raise ConfigError(f"{name!r} is not a map filter; innovations need one")
+    estimator = spec.build(config)
+    if not isinstance(estimator, TableFilter):
+        raise ConfigError(f"{name!r} does not run as a table filter")
+    return estimator
+
+
+def run_innovations(
+    estimator: TableFilter, signals: Signals, accept: np.ndarray | None = None
+) -> Innovations:
+    """Run ``estimator`` over ``signals`` in one kernel call and keep ``e_k`` and ``S_k``."""
+    prepared = estimator.prepare(signals, accept)
+    state = estimator.initial_state(prepared)
+    s = np.empty(prepared.y.size)
+    state, yhat, status = run_chunk(
+        state,
+        prepared.idx,
+        prepared.w,
+        prepared.y,
+        prepared.accept,
+        prepared.settings,
+        s_out=s,
+    )
+    return Innovations(prepared.y - yhat, s, status, state, estimator, prepared)
+
+
+def log_likelihood(e: np.ndarray, s: np.ndarray) -> float:
+    """``ℓ = Σ −½ (log 2πS + e²/S)`` over the given samples (``-inf`` if any ``S ≤ 0``)."""
+    if e.size and (not np.all(s > 0) or not np.all(np.isfinite(s))):
+        return -math.inf
+    return float(-0.5 * np.sum(np.log(2.0 * math.pi * s) + e * e / s))
+
+
+def chi2_band(dof: float, probability: float = BAND_PROBABILITY) -> tuple[float, float]:
+    """The two-sided ``probability`` band of a χ²(``dof``) variable."""
+    tail = 0.5 * (1.0 - probability)
+    from scipy.stats import chi2  # imported here: scipy.stats costs ~1 s at CLI start-up
+
+    return float(chi2.ppf(tail, dof)), float(chi2.ppf(1.0 - tail, dof))
+
+
+@dataclass(frozen=True, slots=True)
+class InnovationStats:
+    """The innovation statistics of one pass (module docstring); all dimensionless except
+    ``innovation_mean`` and ``innovation_rms``, in the output's unit."""
+
+    samples: int
+    mean_nis: float
+    mean_nis_band: tuple[float, float]
+    in_band: float  # fraction of samples with NIS_k inside the per-sample χ²(1) band
+    innovation_mean: float
+    innovation_rms: float
+    log_likelihood: float
+
+    @property
+    def consistent(self) -> bool:
+        """Mean NIS inside its χ²(N)/N band."""
+        lo, hi = self.mean_nis_band
+        return lo <= self.mean_nis <= hi
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "samples": self.samples,
+            "mean_nis": self.mean_nis,
+            "mean_nis_band": list(self.mean_nis_band),
+            "consistent": self.consistent,
+            "in_band": self.in_band,
+            "innovation_mean": self.innovation_mean,
+            "innovation_rms": self.innovation_rms,
+            "log_likelihood": self.log_likelihood,
+        }
+
+
+def innovation_stats(e: np.ndarray, s: np.ndarray) -> InnovationStats:
+    """Statistics of the innovations ``e`` with variances ``s`` (accepted samples only)."""
+    n = int(e.size)
+    if n == 0:
+        nan = math.nan
+        return InnovationStats(0, nan, (nan, nan), nan, nan, nan, nan)
+    nis = e * e / s
+    lo1, hi1 = chi2_band(1)
+    lo, hi = chi2_band(n)
+    return InnovationStats(
+        samples=n,
+        mean_nis=float(np.mean(nis)),
+        mean_nis_band=(lo / n, hi / n),
+        in_band=float(np.mean((nis >= lo1) & (nis <= hi1))),
+        innovation_mean=float(np.mean(e)),
+        innovation_rms=float(np.sqrt(np.mean(e * e))),
+        log_likelihood=log_likelihood(e, s),
+    )
+
+
+def stats_of(run: Innovations) -> InnovationStats:
+    """:func:`innovation_stats` over the accepted steps of a pass."""
+    ok = run.accepted
+    return innovation_stats(run.e[ok], run.s[ok])
