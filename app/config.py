@@ -9,6 +9,7 @@ from __future__ import annotations
 import ipaddress
 import os
 from functools import lru_cache
+from pathlib import Path
 from typing import Annotated, Literal
 
 from pydantic import Field, field_validator, model_validator
@@ -140,6 +141,18 @@ class Settings(BaseSettings):
         "write in all (their predicted sum), in MiB.",
     )
 
+    cache_dir: Path | None = Field(
+        None,
+        description="Where parsed A2L files are cached (by content hash); default "
+        "$XDG_CACHE_HOME/mapwise, else ~/.cache/mapwise.",
+    )
+    cache_mb: float = Field(
+        512.0, gt=0, description="Most bytes the A2L cache keeps, in MiB (oldest go first)."
+    )
+    cache_files: int = Field(
+        256, ge=1, le=100_000, description="Most files the A2L cache keeps (oldest go first)."
+    )
+
     allowed_hosts: Annotated[list[str] | None, NoDecode] = Field(
         None,
         description="Host names the server answers to (comma-separated in the env; `*` "
@@ -241,8 +254,26 @@ class Settings(BaseSettings):
         return int(self.max_decompressed_mb * 1024 * 1024)
 
     @property
+    def a2l_cache_dir(self) -> Path:
+        """The A2L parse cache: ``cache_dir``, else the user's cache directory."""
+        if self.cache_dir is not None:
+            return self.cache_dir / "a2l"
+        return default_cache_root() / "a2l"
+
+    @property
+    def cache_bytes(self) -> int:
+        return int(self.cache_mb * 1024 * 1024)
+
+    @property
     def backend(self) -> Literal["sqlite", "postgresql"]:
         return "sqlite" if self.database_url.startswith("sqlite") else "postgresql"
+
+
+def default_cache_root() -> Path:
+    """``$XDG_CACHE_HOME/mapwise``, else ``~/.cache/mapwise`` (the XDG base directory rule)."""
+    xdg = os.environ.get("XDG_CACHE_HOME", "").strip()
+    base = Path(xdg) if xdg and Path(xdg).is_absolute() else Path.home() / ".cache"
+    return base / "mapwise"
 
 
 def _host_name(host: str) -> str:

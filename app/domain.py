@@ -40,8 +40,12 @@ class SeriesRole(StrEnum):
 
 @dataclass(frozen=True, slots=True)
 class Channel:
+    """A dataset's channel; ``masked``: its samples masked on upload (non-finite or flagged
+    invalid, filled from the valid neighbours, `docs/data-formats.md#multi-rate`)."""
+
     name: str
     unit: str
+    masked: int = 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -58,6 +62,13 @@ class Dataset:
     seed: int | None
     has_truth: bool
     created_at: datetime
+    # What ingest said about the upload (channels skipped, dropped, masked, resampled).
+    notes: tuple[str, ...] = ()
+
+    @property
+    def masked(self) -> dict[str, int]:
+        """The masked samples of each channel that has any."""
+        return {c.name: c.masked for c in self.channels if c.masked}
 
     def unit_of(self, name: str) -> str:
         return next((c.unit for c in self.channels if c.name == name), "")
@@ -179,6 +190,18 @@ class BaseMap:
     config: dict[str, Any] | None
     parent_base_map_id: int | None
     metrics: dict[str, Any]
+    created_at: datetime
+
+
+@dataclass(frozen=True, slots=True)
+class Ecu:
+    """An uploaded A2L with the ECU's current values (``values_format`` ``None``: none)."""
+
+    id: int
+    name: str
+    a2l_sha256: str
+    characteristics: int
+    values_format: str | None
     created_at: datetime
 
 

@@ -25,7 +25,17 @@ from fastapi.middleware.cors import CORSMiddleware
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from app.api.deps import Services, require_token
-from app.api.routers import base_maps, catalog, datasets, frontend, me, runs, stream, sweeps
+from app.api.routers import (
+    base_maps,
+    catalog,
+    datasets,
+    ecus,
+    frontend,
+    me,
+    runs,
+    stream,
+    sweeps,
+)
 from app.api.security import DEFAULT_CSP, TrustedHosts, docs_router
 from app.config import Settings, get_settings
 from app.db.engine import Database
@@ -41,6 +51,7 @@ from app.runs.executor import RunExecutor, make_executor
 from app.runs.hub import LiveHub
 from app.services.base_maps import BaseMapService
 from app.services.datasets import DatasetService
+from app.services.ecus import EcuService
 from app.services.runs import RunService
 from app.services.sweeps import SweepService
 from app.services.tokens import TokenService
@@ -88,6 +99,7 @@ def create_app(settings: Settings | None = None, *, execute_runs: bool = True) -
             sweeps=SweepService(db, run_service),
             base_maps=BaseMapService(db, max_cells=settings.max_cells),
             tokens=TokenService(db),
+            ecus=EcuService(db, settings),
             revision=revision,
         )
         if isinstance(executor, RunExecutor):
@@ -132,7 +144,7 @@ def create_app(settings: Settings | None = None, *, execute_runs: bool = True) -
     api = [Depends(require_token)]
     app.include_router(catalog.open_router, prefix="/api")
     app.include_router(docs_router(app))
-    for module in (catalog, me, datasets, runs, base_maps, sweeps):
+    for module in (catalog, me, datasets, runs, base_maps, sweeps, ecus):
         app.include_router(module.router, prefix="/api", dependencies=api)
     app.include_router(stream.router, prefix="/api")
     app.include_router(frontend.router)
@@ -143,7 +155,7 @@ def create_app(settings: Settings | None = None, *, execute_runs: bool = True) -
         app.add_middleware(
             CORSMiddleware,
             allow_origins=settings.cors_origins,
-            allow_methods=["GET", "POST", "PATCH", "DELETE"],
+            allow_methods=["GET", "POST", "PUT", "PATCH", "DELETE"],
             allow_headers=["Authorization", "Content-Type"],
         )
     app.add_middleware(StrictJson)

@@ -24,6 +24,7 @@ from app.runs.executor import Executor
 from app.runs.hub import LiveHub
 from app.services.base_maps import BaseMapService
 from app.services.datasets import DatasetService
+from app.services.ecus import EcuService
 from app.services.runs import RunService
 from app.services.sweeps import SweepService
 from app.services.tokens import TokenService
@@ -40,6 +41,7 @@ class Services:
     sweeps: SweepService
     base_maps: BaseMapService
     tokens: TokenService
+    ecus: EcuService
     revision: str | None = None
     loop_lag: LoopLag = field(default_factory=LoopLag)
 
@@ -72,6 +74,10 @@ ROUTE_SCOPES: dict[str, str] = {
     "POST /base-maps": "admin",
     "POST /sweeps": "run",
     "POST /batches": "run",
+    "POST /ecus": "run",
+    "PUT /ecus/{ecu_id}/values": "run",
+    "DELETE /ecus/{ecu_id}": "admin",
+    "POST /ecus/{ecu_id}/maps/{name}/base-map": "admin",
 }
 READ_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
 

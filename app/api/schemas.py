@@ -72,6 +72,10 @@ class DatasetOut(BaseModel):
     scenario: str | None
     seed: int | None
     created_at: datetime
+    # What ingest did on upload, and the masked (non-finite or invalid) samples per channel
+    # that had any (docs/data-formats.md#multi-rate); null when there is nothing to say.
+    notes: list[str] | None = None
+    masked: dict[str, int] | None = None
 
     @classmethod
     def of(cls, d: Dataset) -> DatasetOut:
@@ -88,6 +92,8 @@ class DatasetOut(BaseModel):
             scenario=d.scenario,
             seed=d.seed,
             created_at=d.created_at,
+            notes=list(d.notes) or None,
+            masked=d.masked or None,
         )
 
 
@@ -120,6 +126,10 @@ class SimulateIn(BaseModel):
     name: Annotated[str, Field(max_length=200, json_schema_extra=name_schema)] | None = None
     duration_s: float | None = Field(
         None, gt=0, strict=True, description="Simulate only the first S s."
+    )
+    mismatch: Literal["none", "nominal", "severe"] = Field(
+        "nominal",
+        description="Plant/estimator model mismatch (docs/fidelity.md); none: perfect model.",
     )
 
 

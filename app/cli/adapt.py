@@ -11,14 +11,19 @@ import json
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from app.cli import adapt_a2l
 from app.cli.errors import UsageError
 from app.io.map_json import map_document
 from estimation.errors import ConfigError
 from estimation.registry import EstimatorKind, get_spec, names
+
+if TYPE_CHECKING:
+    from app.io.csv_files import CsvLog
+    from estimation.table import Table
 
 # The option flags and the config key each sets; a filter takes those its config model has,
 # and any other is a usage error, not silently ignored.
@@ -46,11 +51,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--axis",
         action="append",
-        required=True,
         metavar="NAME=B1,B2,...",
-        help="one per table dimension; NAME is an input column",
+        help="one per table dimension; NAME is an input column (with --a2l: optional)",
     )
-    p.add_argument("--y", required=True, metavar="COLUMN", help="the measured table output")
+    p.add_argument(
+        "--y",
+        metavar="COLUMN",
+        help="the measured table output (with --a2l: optional if a channel is named as the map)",
+    )
     p.add_argument("--sigma-w", type=float, help="random-walk σw per cell and sample")
     p.add_argument("--sigma-v", type=float, help="measurement noise σv")
     p.add_argument("--p0", type=float, help="initial variance of every cell")
@@ -67,12 +75,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--gate-sigma", type=float, help="reject samples with |e| > K·sqrt(s)")
     p.add_argument("--out", type=Path, metavar="MAP.json", help="write the map document here")
     p.add_argument("--json", action="store_true", help="print the map document on stdout")
+    adapt_a2l.add_arguments(p)
     p.set_defaults(handler=run_command)
 
 
 def run_command(args: argparse.Namespace) -> int:
     """``mapwise adapt``: the map document to ``--out``, then the table (or JSON) on stdout."""
-    axes = [parse_axis(a) for a in args.axis]
+    adapt_a2l.check_flags(args)
+    if args.a2l is None:
+        missing = [flag for flag, v in (("--axis", args.axis), ("--y", args.y)) if v is None]
+        if missing:
+            raise UsageError(f"the following arguments are required: {', '.join(missing)}")
+    axes = [parse_axis(a) for a in args.axis or []]
     options: dict[str, Any] = {
         key: getattr(args, key)
         for key in ("sigma_w", "sigma_v", "p0", "theta0", "limit", "forgetting", "mu")
@@ -90,17 +104,32 @@ def run_command(args: argparse.Namespace) -> int:
         sensor = {k: v for k, v in sensor_flags.items() if v is not None}
         sensor.setdefault("delay_s", None)
         options["sensor"] = sensor
+    log = target = None
+    load_s = 0.0
+    if args.a2l is not None:  # every numeric column: the A2L's quantities are matched to them
+        t0 = time.perf_counter()
+        log = load_log(args.input, None, args.time)
+        load_s = time.perf_counter() - t0
+        target = adapt_a2l.resolve(args, log.signals.names, axes or None)
+        axes = target.axes
+        start = adapt_a2l.theta0(target)
+        if start is not None and "theta0" not in options:
+            allowed = get_spec(args.estimator).config_model.model_fields
+            if "theta0" in allowed:
+                options["theta0"] = start
     request = AdaptRequest(
         input=args.input,
         estimator=args.estimator,
         axes=axes,
-        output=args.y,
+        output=args.y if target is None else target.output,
         options=options,
         locked=parse_cells(args.lock, len(axes)) if args.lock else [],
         gate_sigma=args.gate_sigma,
         time_column=args.time,
     )
-    document = adapt(request)
+    document = adapt(request, log=log, load_s=load_s)
+    if target is not None:
+        document |= adapt_a2l.write_outputs(args, target, document_table(document))
     if args.out is not None:
         try:
             args.out.write_text(json.dumps(document, indent=1) + "\n")
@@ -181,18 +210,35 @@ def build_config(request: AdaptRequest, units: dict[str, str]) -> dict[str, Any]
     }
 
 
-def adapt(request: AdaptRequest) -> dict[str, Any]:
-    """Load the log, run the filter over it and return the contract document."""
+def load_log(path: Path, columns: list[str] | None, time_column: str | None) -> CsvLog:
+    """The CSV log's ``columns`` (``None``: every numeric column)."""
     from app.io.csv_files import read_csv
 
+    return read_csv(path, columns=columns, time_column=time_column)
+
+
+def document_table(document: dict[str, Any]) -> Table:
+    """The learned table of a map document."""
+    from estimation.table import Axis, Table
+
+    axes = [Axis(a["name"], a.get("unit", ""), a["breakpoints"]) for a in document["axes"]]
+    return Table(axes, np.asarray(document["values"], dtype=np.float64))
+
+
+def adapt(
+    request: AdaptRequest, *, log: CsvLog | None = None, load_s: float = 0.0
+) -> dict[str, Any]:
+    """Load the log (unless given, read in ``load_s``), run the filter over it and return
+    the contract document."""
     spec = get_spec(request.estimator)
     map_filters = names(EstimatorKind.MAP_FILTER)
     if request.estimator not in map_filters:
         raise ConfigError(f"--estimator must be one of {', '.join(map_filters)}")
     columns = [name for name, _ in request.axes] + [request.output]
-    t0 = time.perf_counter()
-    log = read_csv(request.input, columns=columns, time_column=request.time_column)
-    load_s = time.perf_counter() - t0
+    if log is None:
+        t0 = time.perf_counter()
+        log = load_log(request.input, columns, request.time_column)
+        load_s = time.perf_counter() - t0
     sensor = request.options.get("sensor")
     if sensor and sensor.get("delay_s") and log.time_column is None:
         raise ConfigError("--delay-s needs a time column in seconds: pass --time COLUMN")

@@ -12,7 +12,7 @@ import sys
 from collections.abc import Sequence
 from typing import NoReturn
 
-from app.cli import adapt, bench, reproduce, run, serve, simulate, sweep
+from app.cli import a2l, adapt, bench, reproduce, run, serve, simulate, sweep, tune
 from app.cli.errors import EXIT_USAGE, UsageError
 from app.errors import AppError
 from estimation.errors import EstimationError
@@ -30,12 +30,14 @@ def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="mapwise", description=__doc__.splitlines()[0] if __doc__ else None)
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     adapt.add_parser(sub)
+    a2l.add_parser(sub)
     run.add_parser(sub)
     simulate.add_parser(sub)
     bench.add_parser(sub)
     reproduce.add_parser(sub)
     serve.add_parsers(sub)
     sweep.add_parser(sub)
+    tune.add_parser(sub)
     return parser
 
 

@@ -47,7 +47,11 @@ class Base(DeclarativeBase):
 
 
 class DatasetRow(Base):
-    """A log or simulation: channel list, time base and the samples as an npz payload."""
+    """A log or simulation: channel list, time base and the samples as an npz payload.
+
+    ``channels``: ``[{"name", "unit"}]``, plus ``"masked": n`` on a channel with ``n > 0``
+    masked samples; ``notes``: what ingest said about the upload (``NULL``: nothing).
+    """
 
     __tablename__ = "datasets"
     __table_args__ = ({"sqlite_autoincrement": True},)
@@ -60,6 +64,7 @@ class DatasetRow(Base):
     duration_s: Mapped[float] = mapped_column(Float)
     time_column: Mapped[str] = mapped_column(String(200))
     channels: Mapped[list[Any]] = mapped_column(JSON)
+    notes: Mapped[list[str] | None] = mapped_column(JSON)
     scenario: Mapped[str | None] = mapped_column(String(64))
     seed: Mapped[int | None] = mapped_column(Integer)
     payload: Mapped[bytes] = mapped_column(LargeBinary, deferred=True)
@@ -207,3 +212,20 @@ class ApiTokenRow(Base):
     last_used_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
     revoked_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
     scopes: Mapped[str] = mapped_column(String(64))  # comma-separated: read,run,admin
+
+
+class EcuRow(Base):
+    """An ECU: its A2L and current values (HEX, S19, DCM or CDFX) as uploaded, the A2L's
+    hash (the key of the parse cache) and its number of characteristics."""
+
+    __tablename__ = "ecus"
+    __table_args__ = ({"sqlite_autoincrement": True},)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    name: Mapped[str] = mapped_column(String(200))
+    a2l_sha256: Mapped[str] = mapped_column(String(64))
+    a2l: Mapped[bytes] = mapped_column(LargeBinary, deferred=True)
+    characteristics: Mapped[int] = mapped_column(Integer)
+    values_format: Mapped[str | None] = mapped_column(String(8))
+    values: Mapped[bytes | None] = mapped_column(LargeBinary, deferred=True)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)

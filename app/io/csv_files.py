@@ -6,8 +6,9 @@ non-numeric; lines starting with ``#`` are comments. With ``;`` or tab as delimi
 comma (``1,5``) is recognised. Every problem is reported with its file line and column name.
 
 ``mapwise adapt`` reads only the columns it needs (:func:`read_csv` with ``columns``); the
-upload path (:mod:`app.io.ingest`) calls :func:`parse_csv` with ``strict=True`` so that
-every column must be numeric.
+upload path (:mod:`app.io.ingest`) calls :func:`parse_sparse_csv`: every column must be
+numeric, and an empty cell is no sample of that channel (a sparse multi-rate export,
+`docs/data-formats.md#multi-rate`).
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from __future__ import annotations
 import csv
 import re
 from collections import Counter
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping, Sequence, Set
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -26,7 +27,7 @@ from app.io.names import check_name
 from estimation import Signals
 from estimation.errors import SignalError
 
-TIME_COLUMNS = ("time", "time_s", "t", "timestamp")
+TIME_COLUMNS = ("time", "time_s", "t", "timestamp", "timestamps")  # the last: asammdf's exports
 DELIMITERS = ",;\t"
 _HEADER_UNIT = re.compile(r"^\s*(?P<name>.+?)\s*\[(?P<unit>[^\]]*)\]\s*$")
 _DECIMAL_COMMA = re.compile(r"^\s*[+-]?\d+,\d+([eE][+-]?\d+)?\s*$")
@@ -53,6 +54,30 @@ class CsvLog:
     time_column: str | None
     delimiter: str = ","
     decimal: str = "."
+
+
+@dataclass(frozen=True, slots=True)
+class SparseCsv:
+    """A CSV read with empty cells allowed: time (s, or the sample index), each column NaN
+    where its cell is empty, units, the time column used and the empty cells per column."""
+
+    time: np.ndarray
+    columns: dict[str, np.ndarray]
+    units: dict[str, str]
+    time_column: str | None
+    empty: dict[str, int]
+    decimal: str = "."
+
+
+@dataclass(frozen=True, slots=True)
+class _Table:
+    time: np.ndarray
+    values: dict[str, np.ndarray | None]
+    units: dict[str, str]
+    time_column: str | None
+    delimiter: str
+    decimal: str
+    lines: list[int]
 
 
 def read_csv(
@@ -101,6 +126,94 @@ def parse_csv(
     units by column name (an unknown name is an error, field ``units.<name>``). ``decimal``
     is ``"."``, ``","`` or ``None`` (detected). Raises :class:`LogFormatError`.
     """
+    table = _read_table(
+        text,
+        columns=columns,
+        time_column=time_column,
+        strict=strict,
+        units=units,
+        decimal=decimal,
+        max_header_chars=max_header_chars,
+        max_columns=max_columns,
+        empty_is_missing=False,
+    )
+    try:
+        parsed = {name: v for name, v in table.values.items() if v is not None}
+        signals = Signals(table.time, parsed, table.units)
+    except SignalError as exc:
+        message, line = _with_line(str(exc), table.lines)
+        raise LogFormatError(message, field=table.time_column or "time", line=line) from None
+    return CsvLog(signals, table.time_column, table.delimiter, table.decimal)
+
+
+def parse_sparse_csv(
+    text: str,
+    *,
+    time_column: str | None = None,
+    units: Mapping[str, str] | None = None,
+    max_header_chars: int | None = None,
+    max_columns: int | None = None,
+) -> SparseCsv:
+    """Parse CSV ``text`` whose channels may have empty cells: a sparse multi-rate export
+    (MDA, asammdf ``to_dataframe(use_interpolation=False)``) holds each channel only on the
+    rows of its own samples. Every column must be numeric (:func:`parse_csv` with
+    ``strict``); an empty cell is no sample of that channel (NaN in
+    :attr:`SparseCsv.columns`), except in the time column. A row with no sample of any
+    channel is refused, naming its line, as is every explicit ``nan``/``inf``."""
+    table = _read_table(
+        text,
+        columns=None,
+        time_column=time_column,
+        strict=True,
+        units=units,
+        decimal=None,
+        max_header_chars=max_header_chars,
+        max_columns=max_columns,
+        empty_is_missing=True,
+    )
+    try:
+        Signals(table.time, {})
+    except SignalError as exc:
+        message, line = _with_line(str(exc), table.lines)
+        raise LogFormatError(message, field=table.time_column or "time", line=line) from None
+    values = {name: v for name, v in table.values.items() if v is not None}
+    if values and table.time.size:
+        sampled = np.zeros(table.time.size, dtype=bool)
+        for v in values.values():
+            sampled |= np.isfinite(v)
+        if not np.all(sampled):
+            k = int(np.argmin(sampled))
+            first = next(iter(values))
+            raise LogFormatError(
+                f"line {table.lines[k]}, column {first!r}: empty value, and the row holds no "
+                "sample of any channel",
+                field=first,
+                line=table.lines[k],
+            )
+    return SparseCsv(
+        table.time,
+        values,
+        {name: table.units[name] for name in values},
+        table.time_column,
+        {name: int(np.count_nonzero(np.isnan(v))) for name, v in values.items()},
+        table.decimal,
+    )
+
+
+def _read_table(
+    text: str,
+    *,
+    columns: Sequence[str] | None,
+    time_column: str | None,
+    strict: bool,
+    units: Mapping[str, str] | None,
+    decimal: str | None,
+    max_header_chars: int | None,
+    max_columns: int | None,
+    empty_is_missing: bool,
+) -> _Table:
+    """The header, units and numeric columns of CSV ``text`` (the rules of
+    :func:`parse_csv`); with ``empty_is_missing`` an empty data cell is NaN."""
     lines = _content_lines(text)
     if not lines:
         raise LogFormatError("empty file, expected a header row", field="file")
@@ -167,19 +280,11 @@ def parse_csv(
         for name in names
         if name == time_column or wanted is None or name in wanted
     }
-    values = _parse_body(body, lines_of_body, delimiter, names, must, decimal)
-    time = (
-        values.pop(time_column)
-        if time_column is not None
-        else np.arange(len(lines_of_body), dtype=np.float64)
-    )
-    parsed = {name: v for name, v in values.items() if v is not None}
-    try:
-        signals = Signals(time, parsed, unit_of)
-    except SignalError as exc:
-        message, line = _with_line(str(exc), lines_of_body)
-        raise LogFormatError(message, field=time_column or "time", line=line) from None
-    return CsvLog(signals, time_column, delimiter, decimal)
+    allowed_empty = {n for n in must if n != time_column} if empty_is_missing else set()
+    values = _parse_body(body, lines_of_body, delimiter, names, must, decimal, allowed_empty)
+    stamps = values.pop(time_column) if time_column is not None else None
+    time = stamps if stamps is not None else np.arange(len(lines_of_body), dtype=np.float64)
+    return _Table(time, values, unit_of, time_column, delimiter, decimal, lines_of_body)
 
 
 def split_lines(text: str) -> list[str]:
@@ -337,10 +442,12 @@ def _parse_body(
     names: list[str],
     must: Mapping[str, bool],
     decimal: str,
+    allowed_empty: Set[str] = frozenset(),
 ) -> dict[str, np.ndarray | None]:
     """Floats of the columns in ``must`` (name → strict), converted :data:`CHUNK_ROWS` rows at
     a time so that the cells held as Python strings stay a small part of the file; a
-    non-strict column that is not numeric throughout is ``None``."""
+    non-strict column that is not numeric throughout is ``None``. An empty cell of a column
+    in ``allowed_empty`` is NaN."""
     parts: dict[str, list[np.ndarray] | None] = {name: [] for name in must}
     for lo in range(0, max(len(body), 1), CHUNK_ROWS):
         chunk_lines = lines[lo : lo + CHUNK_ROWS]
@@ -349,7 +456,14 @@ def _parse_body(
             kept = parts.get(name)
             if kept is None:
                 continue
-            values = _parse_column(cells[j], chunk_lines, name, strict=must[name], decimal=decimal)
+            values = _parse_column(
+                cells[j],
+                chunk_lines,
+                name,
+                strict=must[name],
+                decimal=decimal,
+                empty_is_missing=name in allowed_empty,
+            )
             if values is None:
                 parts[name] = None
             else:
@@ -367,14 +481,24 @@ def _is_number(text: str) -> bool:
 
 
 def _parse_column(
-    cells: Sequence[str], lines: list[int], name: str, *, strict: bool, decimal: str = "."
+    cells: Sequence[str],
+    lines: list[int],
+    name: str,
+    *,
+    strict: bool,
+    decimal: str = ".",
+    empty_is_missing: bool = False,
 ) -> np.ndarray | None:
-    """Floats of one column; ``None`` for a non-numeric column when not ``strict``.
+    """Floats of one column; ``None`` for a non-numeric column when not ``strict``; with
+    ``empty_is_missing`` an empty cell is NaN (no sample), an explicit NaN still refused.
 
     The whole column is converted at once; only when that fails is it walked cell by cell
     to name the first bad line.
     """
     texts = [c.replace(",", ".") for c in cells] if decimal == "," else list(cells)
+    empty = _empty_cells(texts) if empty_is_missing else None
+    if empty is not None:
+        texts = ["nan" if e else t for t, e in zip(texts, empty, strict=True)]
     joined = "".join(texts)
     if not joined.isascii() or "_" in joined:  # only then can float() and _NUMBER disagree
         k = next((k for k, t in enumerate(texts) if _NUMBER.fullmatch(t) is None), None)
@@ -404,6 +528,8 @@ def _parse_column(
                 )
         out = np.array([float(t) for t in texts])  # numpy and float() disagree: trust float()
     bad = ~np.isfinite(out)
+    if empty is not None:
+        bad &= ~empty
     if np.any(bad):
         k = int(np.argmax(bad))
         raise LogFormatError(
@@ -413,6 +539,12 @@ def _parse_column(
             line=lines[k],
         )
     return out
+
+
+def _empty_cells(texts: list[str]) -> np.ndarray | None:
+    """Where the cells are empty (blank), or ``None`` when none is."""
+    empty = np.fromiter((not t.strip() for t in texts), dtype=bool, count=len(texts))
+    return empty if empty.any() else None
 
 
 def _looks_numeric(text: str) -> bool:

@@ -1,14 +1,14 @@
-"""CSV uploads: decode the bytes, then the shared reader :func:`app.io.csv_files.parse_csv`
-with every column required to be numeric."""
+"""CSV uploads: decode the bytes, then the shared reader
+:func:`app.io.csv_files.parse_sparse_csv` (every column numeric; an empty cell is no sample
+of that channel)."""
 
 from __future__ import annotations
 
 import re
 from collections.abc import Mapping
 
-from app.io.csv_files import DELIMITERS, parse_csv, split_lines
+from app.io.csv_files import DELIMITERS, SparseCsv, parse_sparse_csv, split_lines
 from app.io.errors import InputError, unsupported
-from estimation import Signals
 
 _BINARY = re.compile(r"[\x00-\x08\x0b\x0e-\x1f\x7f]")
 
@@ -20,8 +20,8 @@ def read_csv_upload(
     time_column: str | None,
     max_header_bytes: int,
     max_channels: int,
-) -> tuple[Signals, str | None, list[str]]:
-    """Signals, the time column used and notes of a CSV upload (UTF-8, else Latin-1)."""
+) -> tuple[SparseCsv, list[str]]:
+    """The columns and notes of a CSV upload (UTF-8, else Latin-1)."""
     notes: list[str] = []
     try:
         text = data.decode("utf-8-sig")
@@ -34,9 +34,8 @@ def read_csv_upload(
             f"binary data at byte {match.start()}: not CSV text, and no MCAP or MDF4 magic"
         )
     _reject_unknown_delimiter(text)
-    log = parse_csv(
+    log = parse_sparse_csv(
         text,
-        strict=True,
         units=units,
         time_column=time_column,
         max_header_chars=max_header_bytes,
@@ -46,7 +45,7 @@ def read_csv_upload(
         notes.append("decimal comma")
     if log.time_column is None:
         notes.append("no time column: time is the sample index (1 Hz)")
-    return log.signals, log.time_column, notes
+    return log, notes
 
 
 def _reject_unknown_delimiter(text: str) -> None:

@@ -6,8 +6,15 @@ asammdf), otherwise text → CSV. Every problem raises :class:`~app.io.errors.In
 with a ``code`` (``validation_error`` / ``unsupported_format`` / ``payload_too_large``),
 the ``field`` it concerns (column, channel, ``"file"``) and a message naming the line/sample.
 
-Validation common to all formats (:func:`ingest`): at least one channel besides time, at
-least ``min_samples`` rows, strictly increasing finite time, finite values everywhere
+Each reader gives the channels as recorded (:class:`~app.io.resample.Track`: own time base,
+masked samples as NaN; MDF4/MDF3 decide hold or interpolate from the channel metadata, CSV
+and MCAP from the values). :func:`ingest` keeps the channels asked for (all by default) and
+puts them on one raster (:func:`app.io.resample.resample`, `docs/data-formats.md#multi-rate`):
+a rate, the raster of a named channel, or by default the slowest kept channel's. A masked
+sample (non-finite, invalid) is counted per channel, never a reason to refuse the file.
+
+Validation common to all formats: at least one channel besides time, at least
+``min_samples`` rows, strictly increasing finite time, finite values after resampling
 (enforced by :class:`estimation.Signals`), and the size limits of :class:`IngestLimits`.
 """
 
@@ -15,15 +22,17 @@ from __future__ import annotations
 
 import os
 import re
-from collections.abc import Mapping
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from typing import BinaryIO
 
 import numpy as np
 
 from app.io.errors import InputError, too_large, unsupported
 from app.io.names import bad_character, check_name
+from app.io.resample import Raster, Track, held_by_values, parse_raster, resample, select
 from estimation import Signals
+from estimation.errors import SignalError
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 MDF_MAGIC = b"MDF     "
@@ -40,16 +49,21 @@ class IngestLimits:
     max_channels: int = 2000
     min_samples: int = 2
     max_decompressed_bytes: int = 512 * 2**20
+    # A rate raster makes rows out of nothing: its table is bounded before it is allocated.
+    max_rows: int = 20_000_000
+    max_values: int = 64 * 2**20  # rows × channels: 512 MiB of float64
 
 
 @dataclass(frozen=True, slots=True)
 class ParsedLog:
-    """A validated log: ``signals`` (time in s, float64 channels with units) and provenance."""
+    """A validated log: ``signals`` (time in s, float64 channels with units), provenance,
+    notes, and the masked (non-finite or invalid) samples per kept channel that has any."""
 
     signals: Signals
     source: str
     time_column: str | None
     notes: tuple[str, ...] = ()
+    masked: Mapping[str, int] = field(default_factory=dict)
 
     @property
     def rows(self) -> int:
@@ -96,43 +110,97 @@ def ingest(
     units: Mapping[str, str] | None = None,
     time_column: str | None = None,
     limits: IngestLimits | None = None,
+    channels: Sequence[str] | None = None,
+    raster: str | None = None,
 ) -> ParsedLog:
     """Parse and validate an uploaded log.
 
     ``source``: the file's bytes, a binary file object (read from its current position), or
     a server-side path. ``units``: unit overrides by channel name (a units sidecar).
     ``time_column``: the time column/field; default the first of ``time, time_s, t,
-    timestamp`` present.
+    timestamp, timestamps`` present. ``channels``: the channels to keep (default all).
+    ``raster``: ``"100Hz"``, ``"10ms"``, ``"channel:NAME"`` (:func:`parse_raster`); default
+    the slowest kept channel's raster.
     """
     limits = limits or IngestLimits()
+    wanted = list(channels) if channels is not None else None
+    grid = parse_raster(raster)  # a bad raster fails before the file is read
     data = _read_bounded(source, limits.max_bytes)
     kind = detect_format(data[:4096])
+    notes: list[str]
     if kind == "mcap":
         from app.io.mcap_files import read_mcap
 
         signals, used_time, notes = read_mcap(
             data, time_column=time_column, max_decompressed_bytes=limits.max_decompressed_bytes
         )
-        signals = _apply_units(signals, units)
+        tracks = _tracks_of(signals, classify=grid != Raster())
     elif kind == "mdf4":
         from app.io.mdf_files import read_mdf
 
-        signals, used_time, notes = read_mdf(
-            data, max_decompressed_bytes=limits.max_decompressed_bytes
+        tracks, used_time, notes = read_mdf(
+            data, max_decompressed_bytes=limits.max_decompressed_bytes, channels=wanted
         )
-        signals = _apply_units(signals, units)
     else:
         from app.io.csv_upload import read_csv_upload
 
-        signals, used_time, notes = read_csv_upload(
+        log, notes = read_csv_upload(
             data,
             units=units,
             time_column=time_column,
             max_header_bytes=limits.max_header_bytes,
             max_channels=limits.max_channels,
         )
+        used_time = log.time_column
+        tracks = _sparse_tracks(log.time, log.columns, log.units, log.empty, grid, notes)
+    kept = select(tracks, wanted)
+    _check_recorded(kept, limits)
+    table = resample(kept, grid, max_rows=limits.max_rows, max_values=limits.max_values)
+    try:
+        signals = Signals(table.time, table.channels, table.units)
+    except SignalError as exc:
+        raise InputError(str(exc), field="file") from None
+    if kind != "csv":  # CSV units are applied while parsing (the units row rule)
+        signals = _apply_units(signals, units)
     _check_shape(signals, limits)
-    return ParsedLog(signals, kind, used_time, tuple(notes))
+    return ParsedLog(signals, kind, used_time, (*notes, *table.notes), dict(table.masked))
+
+
+def _tracks_of(signals: Signals, *, classify: bool) -> list[Track]:
+    """Channels on one shared time base; hold decided from the values only when they are
+    to be resampled (:func:`held_by_values`)."""
+    return [
+        Track(
+            n, signals.units[n], signals.time, signals[n], classify and held_by_values(signals[n])
+        )
+        for n in signals.names
+    ]
+
+
+def _sparse_tracks(
+    time: np.ndarray,
+    columns: Mapping[str, np.ndarray],
+    units: Mapping[str, str],
+    empty: Mapping[str, int],
+    grid: Raster,
+    notes: list[str],
+) -> list[Track]:
+    """CSV columns as tracks: a column with empty cells has samples only on its filled rows
+    (noted); hold or interpolate from the values when anything is to be resampled."""
+    classify = grid != Raster() or any(empty.values())
+    tracks = []
+    for name, values in columns.items():
+        if empty[name]:
+            filled = ~np.isnan(values)
+            notes.append(
+                f"column {name!r}: a value on {int(filled.sum())} of {values.size} rows "
+                "(empty cells: no sample)"
+            )
+            t, v = time[filled], values[filled]
+        else:
+            t, v = time, values
+        tracks.append(Track(name, units[name], t, v, classify and held_by_values(v)))
+    return tracks
 
 
 def _read_bounded(
@@ -169,6 +237,23 @@ def _apply_units(signals: Signals, units: Mapping[str, str] | None) -> Signals:
             )
     merged = {**signals.units, **{k: str(v) for k, v in units.items()}}
     return Signals(signals.time, signals.channels, merged)
+
+
+def _check_recorded(tracks: Sequence[Track], limits: IngestLimits) -> None:
+    """What no raster can mend: no channel, too many, or too few samples in every channel."""
+    if not tracks:
+        raise InputError("no data channels besides the time base", field="file")
+    if len(tracks) > limits.max_channels:
+        raise InputError(
+            f"{len(tracks)} channels, the limit is {limits.max_channels}", field="file"
+        )
+    rows = max(t.time.size for t in tracks)
+    if rows == 0:
+        raise InputError("no data rows (0 samples)", field="file")
+    if rows < limits.min_samples:
+        raise InputError(
+            f"too few samples: {rows}, at least {limits.min_samples} needed", field="file"
+        )
 
 
 def _check_shape(signals: Signals, limits: IngestLimits) -> None:

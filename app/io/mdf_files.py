@@ -1,10 +1,19 @@
 """Read drive logs from MDF (ASAM MDF 4, and 3) with asammdf.
 
-Every numeric scalar channel becomes a float64 channel with its unit (physical values,
-conversions applied); master (time) channels form the time base, text/array/structure
-channels are skipped (noted). When the channel groups have different time bases, every
-channel is resampled by linear interpolation onto the time base of the group with the most
-samples, restricted to the span all groups cover — a resampling stated in the notes.
+Every numeric scalar channel becomes a :class:`~app.io.resample.Track`: its own group's
+timestamps and float64 physical values (conversions applied) with its unit; master (time)
+channels form the time bases, text/array/structure channels are skipped (noted). A sample
+that is non-finite (a rational conversion's pole gives ±inf) or flagged in the invalidation
+bits is *masked* — counted per channel, never a reason to refuse the file. The channels are
+then put on one raster by :func:`app.io.resample.resample`.
+
+Hold or interpolate is decided per channel from its metadata
+(`docs/data-formats.md#multi-rate`): held (previous value) when the conversion is a table
+without interpolation — value→value (TAB), range→value (RTAB), value→text (TABX),
+range→text (RTABX), bitfield — or when the raw value is an integer of at most 8 bits shown
+as recorded (no conversion), which covers status bytes and booleans (1 bit); every other
+channel is interpolated linearly. A value→text channel keeps its raw number (asammdf's
+``ignore_value2text_conversions``); its table is written in the notes.
 
 Untrusted input: zipped data blocks (``##DZ``) are inflated once here, bounded, before
 asammdf sees the file, so a block that lies about its size or a decompression bomb is
@@ -18,11 +27,15 @@ import re
 import struct
 import sys
 import zlib
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+from asammdf.blocks import v2_v3_constants as v3c
+from asammdf.blocks import v4_constants as v4c
 
 from app.io.errors import InputError, too_large, unsupported
+from app.io.resample import Track
 from estimation import Signals
 from estimation.errors import SignalError
 
@@ -30,25 +43,22 @@ MAGIC = b"MDF     "
 _DZ = struct.Struct("<4s4xQQ2sBxIQQ")  # id, length, links, org type, zip type, param, org, data
 
 
-def read_mdf(data: bytes, *, max_decompressed_bytes: int) -> tuple[Signals, str, list[str]]:
-    """Signals, the master channel name and notes of an MDF file."""
+def read_mdf(
+    data: bytes, *, max_decompressed_bytes: int, channels: Sequence[str] | None = None
+) -> tuple[list[Track], str, list[str]]:
+    """The numeric channels of an MDF file as tracks (only ``channels``, if given), the
+    master channel name of the first group read, and notes."""
     if not data.startswith(MAGIC):
         raise unsupported("not an MDF file (no 'MDF     ' magic)")
     version = data[8:16].decode("ascii", "replace").strip()
     if version[:1] not in ("3", "4"):
         raise unsupported(f"MDF version {version!r} is not supported (3.x and 4.x are)")
     _check_zipped_blocks(data, max_decompressed_bytes)
-    groups = _read_groups(data)
     notes: list[str] = []
-    groups = [g for g in groups if _usable(g, notes)]
-    if not groups:
+    tracks, master = _read_tracks(data, set(channels) if channels is not None else None, notes)
+    if not tracks:
         raise InputError("the MDF file has no numeric channels", field="file")
-    time, channels, units, master = _common_base(groups, notes)
-    try:
-        signals = Signals(time, channels, units)
-    except SignalError as exc:
-        raise InputError(str(exc), field=master) from None
-    return signals, master, notes
+    return tracks, master, notes
 
 
 def _check_zipped_blocks(data: bytes, budget: int) -> None:
@@ -83,38 +93,156 @@ def _check_zipped_blocks(data: bytes, budget: int) -> None:
         start = data.find(b"##DZ", start + 4)
 
 
-def _read_groups(data: bytes) -> list[dict[str, Any]]:
-    """Per channel group: master name, timestamps and ``(name, unit, samples)`` of channels."""
+# Conversions that map by table without interpolation: the physical value is a state.
+_TABLES = {
+    4: {
+        v4c.CONVERSION_TYPE_TAB,
+        v4c.CONVERSION_TYPE_RTAB,
+        v4c.CONVERSION_TYPE_TABX,
+        v4c.CONVERSION_TYPE_RTABX,
+        v4c.CONVERSION_TYPE_BITFIELD,
+    },
+    3: {v3c.CONVERSION_TYPE_TAB, v3c.CONVERSION_TYPE_TABX, v3c.CONVERSION_TYPE_RTABX},
+}
+_TEXT_TABLES = {
+    4: {v4c.CONVERSION_TYPE_TABX, v4c.CONVERSION_TYPE_RTABX},
+    3: {v3c.CONVERSION_TYPE_TABX, v3c.CONVERSION_TYPE_RTABX},
+}
+_NO_CONVERSION = {4: {None, v4c.CONVERSION_TYPE_NON}, 3: {None, v3c.CONVERSION_TYPE_NONE}}
+_INTEGERS = {
+    4: set(v4c.INT_TYPES),
+    3: {
+        v3c.DATA_TYPE_UNSIGNED,
+        v3c.DATA_TYPE_SIGNED,
+        v3c.DATA_TYPE_UNSIGNED_INTEL,
+        v3c.DATA_TYPE_UNSIGNED_MOTOROLA,
+        v3c.DATA_TYPE_SIGNED_INTEL,
+        v3c.DATA_TYPE_SIGNED_MOTOROLA,
+    },
+}
+MAX_HELD_BITS = 8
+_TABLE_ENTRIES_NOTED = 8
+
+
+def _read_tracks(data: bytes, wanted: set[str] | None, notes: list[str]) -> tuple[list[Track], str]:
+    """Per channel group, its timestamps (checked strictly increasing) and the wanted
+    numeric channels as tracks; unknown wanted names are a 422 on ``channels``."""
     from asammdf import MDF
 
-    groups = []
+    tracks: list[Track] = []
+    first_master = ""
     # asammdf raises many exception types on malformed files; any of them means "unreadable".
     try:
         with MDF(io.BytesIO(data)) as mdf:
+            major = 4 if str(mdf.version).startswith("4") else 3
             masters = mdf.masters_db
-            seen: set[str] = set()
+            named = _channel_names(mdf, masters)
+            if wanted is not None:
+                _check_wanted(wanted, named)
             for g, group in enumerate(mdf.groups):
-                master_index = masters.get(g)
-                wanted = [
-                    (ch.name, g, i) for i, ch in enumerate(group.channels) if i != master_index
+                picked = [
+                    (name, i)
+                    for name, (gg, i) in named.items()
+                    if gg == g and (wanted is None or name in wanted)
                 ]
-                if not wanted:
+                if not picked:
                     continue
-                signals = mdf.select(wanted, ignore_value2text_conversions=False)
+                selected = mdf.select(
+                    [(group.channels[i].name, g, i) for _, i in picked],
+                    ignore_value2text_conversions=True,
+                )
+                master_index = masters.get(g)
                 master = group.channels[master_index].name if master_index is not None else ""
-                entries = []
-                for signal in signals:
-                    name = signal.name if signal.name not in seen else f"{signal.name} (group {g})"
-                    seen.add(name)
-                    entries.append((name, signal))
-                groups.append({"index": g, "master": master or "time", "channels": entries})
+                master = master or "time"
+                kept = []
+                for (name, i), signal in zip(picked, selected, strict=True):
+                    track = _track(name, signal, group.channels[i], major, notes)
+                    if track is not None:
+                        kept.append(track)
+                if kept:
+                    _check_time(kept[0].time, g, master)
+                    first_master = first_master or master
+                    tracks.extend(kept)
     except InputError:
         raise
     except Exception as exc:
         raise InputError(
             f"the MDF file is truncated or corrupt ({_detail(exc, len(data))})", field="file"
         ) from None
-    return groups
+    return tracks, first_master
+
+
+def _channel_names(mdf: Any, masters: dict[int, int]) -> dict[str, tuple[int, int]]:
+    """Name → (group, channel index) of every non-master channel, named as recorded; a
+    name seen in an earlier group gets `` (group g)``."""
+    named: dict[str, tuple[int, int]] = {}
+    for g, group in enumerate(mdf.groups):
+        for i, channel in enumerate(group.channels):
+            if i == masters.get(g):
+                continue
+            name = channel.name if channel.name not in named else f"{channel.name} (group {g})"
+            named[name] = (g, i)
+    return named
+
+
+def _check_wanted(wanted: set[str], named: dict[str, tuple[int, int]]) -> None:
+    missing = sorted(wanted - named.keys())
+    if missing:
+        shown = list(named)[:50]
+        more = f" (and {len(named) - 50} more)" if len(named) > 50 else ""
+        raise InputError(
+            f"channel{'s' if len(missing) > 1 else ''} {', '.join(repr(n) for n in missing)} "
+            f"not in the file; it has {shown}{more}",
+            field="channels",
+        )
+
+
+def _track(name: str, signal: Any, channel: Any, major: int, notes: list[str]) -> Track | None:
+    """The channel as a track: float64 values, NaN where non-finite or invalid; ``None``
+    (noted) for a channel that is not a numeric scalar."""
+    samples = np.asarray(signal.samples)
+    if samples.ndim != 1 or samples.dtype.kind not in "biuf":
+        notes.append(f"channel {name!r} skipped: not numeric ({samples.dtype})")
+        return None
+    values = samples.astype(np.float64)  # a copy: the masked samples are overwritten
+    invalid = getattr(signal, "invalidation_bits", None)
+    masked = ~np.isfinite(values)
+    if invalid is not None:
+        masked |= np.asarray(invalid, dtype=bool)
+    values[masked] = np.nan
+    conversion = channel.conversion
+    kind = conversion.conversion_type if conversion is not None else None
+    hold = kind in _TABLES[major] or (
+        kind in _NO_CONVERSION[major]
+        and channel.data_type in _INTEGERS[major]
+        and channel.bit_count <= MAX_HELD_BITS
+    )
+    if kind in _TEXT_TABLES[major]:
+        notes.append(f"channel {name!r}: raw values kept, value table {_table(conversion, values)}")
+    time = np.asarray(signal.timestamps, dtype=np.float64)
+    return Track(name, str(signal.unit or ""), time, values, hold)
+
+
+def _table(conversion: Any, values: np.ndarray) -> str:
+    """``0='off', 1='idle'`` for the first distinct recorded values of a value→text table."""
+    raw = np.unique(values[np.isfinite(values)])[:_TABLE_ENTRIES_NOTED]
+    try:
+        texts = conversion.convert(raw)
+    except Exception:  # a table asammdf cannot apply: the raw values are still right
+        return "(not readable)"
+    shown = ", ".join(
+        f"{v:g}={t.decode('latin-1', 'replace') if isinstance(t, bytes) else t!s}"
+        for v, t in zip(raw, texts, strict=True)
+    )
+    return shown + (", …" if np.unique(values[np.isfinite(values)]).size > raw.size else "")
+
+
+def _check_time(time: np.ndarray, group: int, master: str) -> None:
+    """A group's timestamps: finite and strictly increasing (:class:`Signals`' rule)."""
+    try:
+        Signals(time, {})
+    except SignalError as exc:
+        raise InputError(f"channel group {group}: {exc}", field=master) from None
 
 
 def _detail(exc: Exception, size: int) -> str:
@@ -145,71 +273,3 @@ def _quiet_asammdf_del(unraisable: Any) -> None:
 _BUFFER_REPR = re.compile(r"'?<_io\.BytesIO object at 0x[0-9a-fA-F]+>'?")
 _previous_hook = sys.unraisablehook
 sys.unraisablehook = _quiet_asammdf_del
-
-
-def _usable(group: dict[str, Any], notes: list[str]) -> bool:
-    """Keep the numeric scalar channels of a group (as float64); note the others."""
-    kept = []
-    time = None
-    for name, signal in group["channels"]:
-        samples = np.asarray(signal.samples)
-        if samples.ndim != 1 or samples.dtype.kind not in "biuf":
-            notes.append(f"channel {name!r} skipped: not numeric ({samples.dtype})")
-            continue
-        values = samples.astype(np.float64)
-        invalid = getattr(signal, "invalidation_bits", None)
-        if invalid is not None and np.any(np.asarray(invalid)):
-            k = int(np.argmax(np.asarray(invalid)))
-            raise InputError(
-                f"channel {name!r}: sample {k} is marked invalid in the file", field=name
-            )
-        if not np.all(np.isfinite(values)):
-            k = int(np.argmax(~np.isfinite(values)))
-            raise InputError(
-                f"channel {name!r} has a non-finite value ({values[k]}) at sample {k}", field=name
-            )
-        time = np.asarray(signal.timestamps, dtype=np.float64)
-        kept.append((name, str(signal.unit or ""), values))
-    group["channels"] = kept
-    group["time"] = time
-    return bool(kept)
-
-
-def _common_base(
-    groups: list[dict[str, Any]], notes: list[str]
-) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, str], str]:
-    base = max(groups, key=lambda g: g["time"].size)
-    time = base["time"]
-    channels: dict[str, np.ndarray] = {}
-    units: dict[str, str] = {}
-    if all(np.array_equal(g["time"], time) for g in groups):
-        for g in groups:
-            for name, unit, values in g["channels"]:
-                channels[name], units[name] = values, unit
-        return time, channels, units, base["master"]
-    for g in groups:
-        t = g["time"]
-        if t.size == 0:
-            raise InputError(f"channel group {g['index']} has no samples", field="file")
-        steps = np.diff(t)
-        if np.any(steps <= 0):
-            k = int(np.argmax(steps <= 0)) + 1
-            raise InputError(
-                f"time of channel group {g['index']} is not strictly increasing at sample {k} "
-                f"({t[k]:g} s after {t[k - 1]:g} s)",
-                field=g["master"],
-            )
-    start = max(float(g["time"][0]) for g in groups)
-    stop = min(float(g["time"][-1]) for g in groups)
-    time = time[(time >= start) & (time <= stop)]
-    if time.size == 0:
-        raise InputError("the channel groups' time ranges do not overlap", field="file")
-    for g in groups:
-        for name, unit, values in g["channels"]:
-            channels[name] = np.interp(time, g["time"], values)
-            units[name] = unit
-    notes.append(
-        f"{len(groups)} channel groups with different time bases: resampled linearly onto the "
-        f"{time.size} samples of group {base['index']} within {start:g}–{stop:g} s"
-    )
-    return time, channels, units, base["master"]

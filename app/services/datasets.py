@@ -8,6 +8,7 @@ keeps its truth (true map, scoring points, true series) for the run metrics.
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from typing import Any, BinaryIO
 
 import numpy as np
@@ -21,6 +22,7 @@ from app.io.ingest import IngestLimits, ingest
 from app.io.names import check_name, without_refused
 from app.io.payload import pack_signals, pack_truth, unpack_signals
 from estimation.errors import EstimationError
+from estimation.mismatch import MismatchLevel
 from estimation.scenarios import get_scenario, scenarios
 from estimation.signals import Signals
 
@@ -49,11 +51,17 @@ class DatasetService:
         units: dict[str, str] | None,
         max_bytes: int,
         max_decompressed_bytes: int = IngestLimits.max_decompressed_bytes,
+        channels: Sequence[str] | None = None,
+        raster: str | None = None,
     ) -> Dataset:
-        """Parse and validate the whole file first; store it only if it is usable."""
+        """Parse and validate the whole file first; store it only if it is usable, with
+        what ingest said about it: its notes and the masked samples per channel
+        (`docs/data-formats.md#multi-rate`). ``channels``: the channels to keep (default
+        all); ``raster``: ``100Hz``, ``10ms`` or ``channel:NAME`` (default the slowest kept
+        channel's raster)."""
         given = _dataset_name(name, filename, "")  # a bad name fails before the file is read
         limits = IngestLimits(max_bytes=max_bytes, max_decompressed_bytes=max_decompressed_bytes)
-        parsed = ingest(source, units=units, limits=limits)
+        parsed = ingest(source, units=units, limits=limits, channels=channels, raster=raster)
         with self.db.write() as s:
             return DatasetRepo(s).add(
                 name=given or f"{parsed.source} upload",
@@ -62,12 +70,22 @@ class DatasetService:
                 rate_hz=parsed.rate_hz,
                 duration_s=parsed.duration_s,
                 time_column=parsed.time_column or "",
-                channels=[Channel(c["name"], c["unit"]) for c in parsed.channels],
+                channels=[
+                    Channel(c["name"], c["unit"], parsed.masked.get(c["name"], 0))
+                    for c in parsed.channels
+                ],
                 payload=pack_signals(parsed.signals),
+                notes=parsed.notes,
             )
 
     def simulate(
-        self, scenario: str, *, seed: int, name: str | None, duration_s: float | None
+        self,
+        scenario: str,
+        *,
+        seed: int,
+        name: str | None,
+        duration_s: float | None,
+        mismatch: MismatchLevel = "nominal",
     ) -> Dataset:
         if scenario not in scenarios():
             raise InvalidRequestError(
@@ -76,7 +94,7 @@ class DatasetService:
             )
         given = _dataset_name(name, None, f"{scenario} (seed {seed})")
         try:
-            data = get_scenario(scenario).build(seed=seed, duration_s=duration_s)
+            data = get_scenario(scenario).build(seed=seed, duration_s=duration_s, mismatch=mismatch)
         except EstimationError as exc:  # out of range, or too short for two samples
             raise InvalidRequestError(str(exc), field="duration_s") from exc
         signals = data.signals

@@ -48,6 +48,16 @@ class TableSpec(BaseModel):
     )
 
 
+class CalibrationLink(BaseModel):
+    """The A2L map a run's table adapts (docs/calibration.md#rest-and-cli): its exports can
+    then be DCM/CDFX keyed by the A2L name and the ECU's patched memory image."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    ecu_id: int = Field(ge=1, le=2**31 - 1)
+    map: str = Field(min_length=1, max_length=1024, description="A MAP or CURVE of the A2L.")
+
+
 class RunRequest(BaseModel):
     """Body of ``POST /api/runs``."""
 
@@ -62,6 +72,9 @@ class RunRequest(BaseModel):
     config: dict[str, Any] = Field(default_factory=dict)
     base_map_id: int | None = Field(None, ge=1, le=2**31 - 1)
     name: str | None = Field(None, max_length=200, json_schema_extra=name_schema)
+    calibration: CalibrationLink | None = Field(
+        None, description="The ECU map the table adapts (GET /api/ecus/{id}/maps/{name}/template)."
+    )
 
 
 @dataclass(frozen=True, slots=True)

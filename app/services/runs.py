@@ -24,16 +24,18 @@ from app.domain import (
 )
 from app.errors import ConflictError, InvalidRequestError
 from app.io.decimate import stride_decimate
+from app.io.errors import InputError
 from app.io.map_json import map_document
 from app.io.payload import unpack_signals
 from app.runs.frames import StatusFrame
+from app.services import calibration_runs as cal
 from app.services.admission import GroupBudget, Limits
 from app.services.run_plan import RunRequest, plan_run
 from estimation.estimator import Snapshot
 from estimation.signals import Signals
 from estimation.table import Axis, Table
 
-EXPORT_FORMATS = ("json", "csv", "mcap", "dcm")
+EXPORT_FORMATS = ("json", "csv", "mcap", "dcm", "cdfx", "image")
 
 
 class Submitter(Protocol):
@@ -81,13 +83,16 @@ class RunService:
     def create(self, request: RunRequest) -> Run:
         """Plan and store the run in one transaction, then hand it to the executor."""
         self.need_executor()
-        run = self._store(request)
+        linked = None
+        if request.calibration is not None:  # the A2L is opened before the transaction
+            linked = cal.link_for_request(self.db, self.settings, request.calibration)
+        run = self._store(request, linked)
         self.submit(run.id)
         return run
 
-    def _store(self, request: RunRequest) -> Run:
+    def _store(self, request: RunRequest, linked: cal.LinkedMap | None = None) -> Run:
         with self.db.write() as s:
-            return self.store_in(s, request)
+            return self.store_in(s, request, linked=linked)
 
     def store_in(
         self,
@@ -97,9 +102,11 @@ class RunService:
         group_id: int | None = None,
         params: dict[str, Any] | None = None,
         budget: GroupBudget | None = None,
+        linked: cal.LinkedMap | None = None,
     ) -> Run:
         """Plan ``request`` and store it, queued, in the caller's transaction ``s`` (its
-        predicted versions added to a group's ``budget``)."""
+        predicted versions added to a group's ``budget``; its table linked to the A2L map
+        ``linked``)."""
         dataset = DatasetRepo(s).get(request.dataset_id)
         base_map = None
         if request.base_map_id is not None:
@@ -113,12 +120,16 @@ class RunService:
         )
         if budget is not None:
             budget.add(plan.prediction)
+        table_spec = plan.table_spec
+        if linked is not None:
+            cal.check_table(linked.char, table_spec, plan.estimator)
+            table_spec = {**(table_spec or {}), "calibration": linked.to_json()}
         return RunRepo(s).add(
             dataset_id=dataset.id,
             name=plan.name,
             estimator=plan.estimator,
             signals=plan.signals,
-            table_spec=plan.table_spec,
+            table_spec=table_spec,
             config=plan.config,
             estimator_config=plan.estimator_config,
             produces_map=plan.produces_map,
@@ -244,13 +255,27 @@ class RunService:
             raise InvalidRequestError("part must be 'map' or 'series'", field="part")
         if version is None:
             raise ConflictError(f"run {run_id} has no map version yet", field="version")
-        if fmt == "json":
-            return Download(
-                _json_bytes(self._map_document(run, version)),
-                "application/json",
-                f"{stem}.json",
+        required = fmt in cal.CALIBRATION_FORMATS
+        linked = None
+        if fmt != "csv":  # a CSV grid is the same with or without a link
+            linked = cal.linked_run(self.db, self.settings, run.table, required=required)
+        if linked is None and required:
+            raise ConflictError(
+                f"run {run_id} is not linked to an A2L map; format={fmt} needs a run created "
+                "with calibration: {ecu_id, map}",
+                field="format",
             )
+        if fmt == "json":
+            document = self._map_document(run, version)
+            if linked is not None:
+                try:
+                    document |= cal.json_extras(linked.char, table_of(version), linked.to_json())
+                except InputError as exc:  # e.g. a non-finite cell: the map itself still exports
+                    document["calibration"] = linked.to_json() | {"error": exc.message}
+            return Download(_json_bytes(document), "application/json", f"{stem}.json")
         table = table_of(version)
+        if linked is not None:
+            return self._calibration_export(run, version, linked, table, fmt, stem)
         output = run.estimator_config.get("output")
         unit = str(run.estimator_config.get("output_unit", ""))
         if fmt == "csv":
@@ -264,6 +289,28 @@ class RunService:
         description = f"mapwise run {run.id} ({run.estimator}), version {version.summary.id}"
         text = map_to_dcm(table, name=name, unit=unit, description=description)
         return Download(text.encode(), "text/plain; charset=utf-8", f"{stem}.dcm")
+
+    def _calibration_export(
+        self,
+        run: Run,
+        version: MapVersion,
+        linked: cal.LinkedMap,
+        table: Table,
+        fmt: str,
+        stem: str,
+    ) -> Download:
+        """DCM / CDFX keyed by the A2L name, or the patched memory image, of a linked run."""
+        name = _safe_name(linked.char.name)
+        if fmt == "dcm":
+            description = f"mapwise run {run.id} ({run.estimator}), version {version.summary.id}"
+            text = cal.dcm_text(linked.char, table, description=description)
+            return Download(text.encode(), "text/plain; charset=utf-8", f"{stem}-{name}.dcm")
+        if fmt == "cdfx":
+            content = cal.cdfx_bytes(linked.char, table)
+            return Download(content, "application/xml", f"{stem}-{name}.cdfx")
+        image, image_format = cal.ecu_image(self.db, linked)
+        patched = cal.patched_image(linked.a2l, linked.char, table, image)
+        return Download(patched, "application/octet-stream", f"{stem}-{name}.{image_format}")
 
     def _map_document(self, run: Run, version: MapVersion) -> dict[str, Any]:
         """The ``mapwise adapt`` document of a version (the same function the CLI uses)."""

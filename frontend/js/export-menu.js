@@ -1,18 +1,30 @@
-/** The "Export" menu button of a run: one item per format, keyboard operable (menu pattern). */
+/**
+ * The "Export" menu button of a run: one item per format, keyboard operable (menu pattern).
+ * A run adapted from an ECU map (its `calibration` link) also exports CDFX and the ECU's
+ * memory image with the map patched in (docs/calibration.md#dashboard).
+ */
 import { api, showError } from "./api.js";
 import { EXPORT_FORMATS, SEL } from "./constants.js";
 import { h, icon, ICONS } from "./dom.js";
 
+/** The formats only a run linked to an ECU map has (`ext`: the file name without a header). */
+export const CALIBRATION_FORMATS = Object.freeze([
+  { value: "cdfx", label: "CDFX (ASAM CDF 2.0)", ext: "cdfx" },
+  { value: "image", label: "Patched ECU image (HEX/S19)", ext: "hex" },
+]);
+
 /**
  * @param {number} runId
- * @param {{versionId: () => number|null, errorHost: HTMLElement, signal: AbortSignal}} opts
- *   versionId: the version to export (null: the run's final map)
+ * @param {{versionId: () => number|null, errorHost: HTMLElement, signal: AbortSignal,
+ *   calibration?: {ecu_id: number, map: string}|null}} opts
+ *   versionId: the version to export (null: the run's final map); calibration: the run's link
  */
-export function exportMenu(runId, { versionId, errorHost, signal }) {
+export function exportMenu(runId, { versionId, errorHost, signal, calibration = null }) {
+  const formats = calibration ? [...EXPORT_FORMATS, ...CALIBRATION_FORMATS] : EXPORT_FORMATS;
   const list = h(
     "div",
     { class: "menu-list", role: "menu", hidden: true },
-    EXPORT_FORMATS.map((f) =>
+    formats.map((f) =>
       h(
         "button",
         {
@@ -27,7 +39,7 @@ export function exportMenu(runId, { versionId, errorHost, signal }) {
               await api.download(
                 `/api/runs/${runId}/export`,
                 { format: f.value, version: vid ?? undefined },
-                `run-${runId}.${f.value}`,
+                `run-${runId}.${f.ext ?? f.value}`,
               );
             } catch (err) {
               showError(errorHost, err);

@@ -9,6 +9,7 @@ import { loadScopes } from "./scopes.js";
 import * as batches from "./views/batches.js";
 import * as compare from "./views/compare.js";
 import * as datasets from "./views/datasets.js";
+import * as ecus from "./views/ecu/index.js";
 import * as newRun from "./views/new-run/index.js";
 import * as runLive from "./views/run/index.js";
 import * as sweeps from "./views/sweeps.js";
@@ -28,6 +29,8 @@ const ROUTES = [
   { path: /^\/batches\/?$/, view: batches, section: "batches" },
   { path: /^\/batches\/(\d+)\/?$/, keys: ["id"], view: batches, section: "batches" },
   { path: /^\/versions\/?$/, view: versions, section: "versions" },
+  { path: /^\/ecus\/?$/, view: ecus, section: "ecus" },
+  { path: /^\/ecus\/(\d+)\/?$/, keys: ["id"], view: ecus, section: "ecus" },
 ];
 
 function initTheme() {

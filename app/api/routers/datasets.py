@@ -36,14 +36,57 @@ def _units(raw: str | None) -> dict[str, str] | None:
     return units
 
 
+def _channels(raw: str | None) -> list[str] | None:
+    """``a, b`` or a JSON array ``["a,b", "c"]`` (for names holding a comma); blank: all."""
+    if raw is None or not raw.strip():
+        return None
+    if raw.lstrip().startswith("["):
+        try:
+            names = json.loads(raw)
+        except json.JSONDecodeError as exc:
+            raise InvalidRequestError(
+                f"channels must be a comma-separated list or a JSON array: {exc.msg}",
+                field="channels",
+            ) from exc
+        if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+            raise InvalidRequestError(
+                'channels must be a JSON array of strings, e.g. ["rpm", "load"]',
+                field="channels",
+            )
+    else:
+        names = raw.split(",")
+    kept = [n.strip() for n in names if n.strip()]
+    return kept or None
+
+
 @router.post("", status_code=201, response_model=DatasetOut)
 def upload_dataset(
     services: ServicesDep,
-    file: Annotated[UploadFile, File(description="CSV, MCAP or MDF4 log (format from content).")],
+    file: Annotated[
+        UploadFile, File(description="CSV, MCAP, MDF4 or MDF3 log (format from content).")
+    ],
     name: Annotated[str | None, Form(max_length=200, json_schema_extra=name_schema)] = None,
     units: Annotated[str | None, Form(description='JSON object {"channel": "unit"}')] = None,
+    channels: Annotated[
+        str | None,
+        Form(
+            max_length=200_000,
+            description="Channels to keep, named as recorded: comma-separated, or a JSON "
+            "array of strings. Default: all.",
+        ),
+    ] = None,
+    raster: Annotated[
+        str | None,
+        Form(
+            max_length=1000,
+            description="Time base: a rate ('100Hz', '1kHz'), a step ('10ms', '0.1s') or "
+            "'channel:NAME'. Default: the raster of the slowest kept channel.",
+        ),
+    ] = None,
 ) -> DatasetOut:
-    """Upload a log. The whole file is validated before anything is stored."""
+    """Upload a log. The whole file is validated before anything is stored. The response
+    also carries ingest's ``notes`` and the ``masked`` samples per channel, when there are
+    any; they are stored with the dataset, so ``GET`` gives them too."""
     dataset = services.datasets.upload(
         file.file,
         filename=file.filename,
@@ -51,6 +94,8 @@ def upload_dataset(
         units=_units(units),
         max_bytes=services.settings.max_upload_bytes,
         max_decompressed_bytes=services.settings.max_decompressed_bytes,
+        channels=_channels(channels),
+        raster=raster,
     )
     return DatasetOut.of(dataset)
 
@@ -59,7 +104,11 @@ def upload_dataset(
 def simulate_dataset(services: ServicesDep, body: SimulateIn) -> DatasetOut:
     """A dataset simulated from a scenario; its truth is kept for the run metrics."""
     dataset = services.datasets.simulate(
-        body.scenario, seed=body.seed, name=body.name, duration_s=body.duration_s
+        body.scenario,
+        seed=body.seed,
+        name=body.name,
+        duration_s=body.duration_s,
+        mismatch=body.mismatch,
     )
     return DatasetOut.of(dataset)
 

@@ -28,6 +28,8 @@ VIEW_ROUTES = (
     "/sweeps/{sweep_id}",
     "/batches",
     "/batches/{batch_id}",
+    "/ecus",
+    "/ecus/{ecu_id}",
 )
 NO_CACHE = {"Cache-Control": "no-cache"}  # revalidate (ETag) so browsers never run stale code
 IMMUTABLE = {"Cache-Control": "public, max-age=31536000, immutable"}

@@ -146,6 +146,7 @@ def get_cells(services: ServicesDep, run_id: Id) -> CellsOut:
                 "text/csv": {},
                 "application/octet-stream": {},
                 "text/plain": {},
+                "application/xml": {},
             },
         }
     },
@@ -153,13 +154,15 @@ def get_cells(services: ServicesDep, run_id: Id) -> CellsOut:
 def export_run(
     services: ServicesDep,
     run_id: Id,
-    format: Annotated[Literal["json", "csv", "mcap", "dcm"], Query()] = "json",
+    format: Annotated[Literal["json", "csv", "mcap", "dcm", "cdfx", "image"], Query()] = "json",
     version: Annotated[int | None, Query(ge=1, le=MAX_ID)] = None,
     part: Literal["map", "series"] | None = None,
 ) -> Response:
     """Download: ``json`` (the ``mapwise adapt`` map document), ``csv`` (map grid, or
-    ``part=series`` the time series), ``mcap`` (series + map versions), ``dcm``."""
-    if part == "series" and format in ("json", "dcm"):
+    ``part=series`` the time series), ``mcap`` (series + map versions), ``dcm``; a run
+    linked to an A2L map also ``cdfx`` and ``image`` (the ECU's patched HEX/S19), its DCM
+    and CDFX keyed by the A2L name with values as the ECU stores them."""
+    if part == "series" and format in ("json", "dcm", "cdfx", "image"):
         raise InvalidRequestError(
             f"part=series is exported as CSV (format=csv) or MCAP; format={format} exports the "
             "map only",

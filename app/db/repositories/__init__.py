@@ -7,6 +7,7 @@ One module per aggregate; every repository is importable from here.
 from app.db.repositories.base import MAX_ID, aware
 from app.db.repositories.base_maps import BaseMapRepo
 from app.db.repositories.datasets import DatasetRepo
+from app.db.repositories.ecus import EcuRepo
 from app.db.repositories.groups import GroupRepo
 from app.db.repositories.metrics import MetricRepo
 from app.db.repositories.runs import RunRepo
@@ -17,6 +18,7 @@ __all__ = [
     "MAX_ID",
     "BaseMapRepo",
     "DatasetRepo",
+    "EcuRepo",
     "GroupRepo",
     "MetricRepo",
     "RunRepo",

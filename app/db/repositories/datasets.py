@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import Any
+
 from sqlalchemy import delete, func, select
 from sqlalchemy.orm import Session
 
@@ -15,9 +18,18 @@ def _dataset(row: DatasetRow, has_truth: bool) -> Dataset:
     return from_row(
         Dataset,
         row,
-        channels=[Channel(c["name"], c.get("unit", "")) for c in row.channels],
+        channels=[Channel(c["name"], c.get("unit", ""), c.get("masked", 0)) for c in row.channels],
+        notes=tuple(row.notes or ()),
         has_truth=has_truth,
     )
+
+
+def _channel_json(channel: Channel) -> dict[str, Any]:
+    """A channel as stored: its masked samples only when there are any."""
+    stored: dict[str, Any] = {"name": channel.name, "unit": channel.unit}
+    if channel.masked:
+        stored["masked"] = channel.masked
+    return stored
 
 
 class DatasetRepo:
@@ -38,6 +50,7 @@ class DatasetRepo:
         scenario: str | None = None,
         seed: int | None = None,
         truth: bytes | None = None,
+        notes: Sequence[str] = (),
     ) -> Dataset:
         row = DatasetRow(
             name=name,
@@ -46,7 +59,8 @@ class DatasetRepo:
             rate_hz=rate_hz,
             duration_s=duration_s,
             time_column=time_column,
-            channels=[{"name": c.name, "unit": c.unit} for c in channels],
+            channels=[_channel_json(c) for c in channels],
+            notes=list(notes) or None,
             scenario=scenario,
             seed=seed,
             payload=payload,

@@ -167,3 +167,126 @@ def test_file_too_large_is_413_and_stores_nothing(
     assert _count(database_url) == before
     small = upload(client, b"time,a\n0,1\n1,2\n")
     assert small.status_code == 201
+
+
+@pytest.fixture(scope="module")
+def measurement_mf4(tmp_path_factory: pytest.TempPathFactory) -> bytes:
+    from tests.support.measurements import write_measurement
+
+    return write_measurement(tmp_path_factory.mktemp("mf4")).bytes()
+
+
+def test_multirate_mdf4_upload_reports_masked_samples_and_keeps_names(
+    client: TestClient, measurement_mf4: bytes
+) -> None:
+    """Through the real app: the enumeration, the ±inf channel and the 1 kHz group among
+    10 ms and 100 ms groups ingest; the default raster is the slowest (100 ms)."""
+    from tests.support.measurements import NMOT, POLE, T100
+
+    response = upload(client, measurement_mf4, name="canape.mf4")
+    assert response.status_code == 201, response.text
+    doc = response.json()
+    assert (doc["source"], doc["rows"]) == ("mdf4", T100.size)
+    assert doc["rate_hz"] == pytest.approx(10.0)
+    assert {"name": NMOT, "unit": "1/min"} in doc["channels"]
+    assert doc["masked"] == {POLE: 10, "lambda": 3}
+    assert any("value table 0=off, 1=idle, 2=run" in n for n in doc["notes"])
+    again = client.get(f"/api/datasets/{doc['id']}").json()
+    assert again["channels"] == doc["channels"]
+    assert (again["notes"], again["masked"]) == (doc["notes"], doc["masked"])  # stored
+    preview = client.get(f"/api/datasets/{doc['id']}/preview").json()
+    assert NMOT in preview["channels"]
+
+
+def test_get_gives_what_the_upload_gave(client: TestClient, measurement_mf4: bytes) -> None:
+    """Notes and masked counts are stored with the dataset: ``GET /api/datasets/{id}`` and
+    the list give the upload's response field for field, on a multi-rate file and on a
+    clean one (nothing to say: ``null`` both times)."""
+    from tests.support.measurements import POLE
+
+    response = upload(client, measurement_mf4, name="canape.mf4", raster="10ms")
+    assert response.status_code == 201, response.text
+    doc = response.json()
+    assert doc["masked"] == {POLE: 10, "lambda": 3}
+    assert any("onto the 10 ms raster (191 rows" in n for n in doc["notes"])
+    assert client.get(f"/api/datasets/{doc['id']}").json() == doc
+    listed = client.get("/api/datasets", params={"limit": 500}).json()["items"]
+    assert next(d for d in listed if d["id"] == doc["id"]) == doc
+
+    clean = upload(client, b"time,a\n0,1\n1,2\n")
+    assert clean.status_code == 201, clean.text
+    assert (clean.json()["notes"], clean.json()["masked"]) == (None, None)
+    assert client.get(f"/api/datasets/{clean.json()['id']}").json() == clean.json()
+
+
+def test_upload_keeps_the_chosen_channels_on_the_chosen_raster(
+    client: TestClient, measurement_mf4: bytes
+) -> None:
+    from tests.support.measurements import NMOT
+
+    for raster, rows in (("100Hz", 191), ("channel:mode", 190), ("10 ms", 191)):
+        response = upload(client, measurement_mf4, channels=f"mode, {NMOT}", raster=raster)
+        assert response.status_code == 201, response.text
+        doc = response.json()
+        assert [c["name"] for c in doc["channels"]] == ["mode", NMOT]
+        assert doc["rows"] == rows, raster
+        assert doc["rate_hz"] == pytest.approx(100.0)
+        assert doc["masked"] is None  # nothing masked in these two channels
+    as_json = upload(client, measurement_mf4, channels=json.dumps(["fast"]), raster="1kHz")
+    assert as_json.status_code == 201, as_json.text
+    assert (as_json.json()["rows"], as_json.json()["rate_hz"]) == (2000, pytest.approx(1000.0))
+
+
+def test_a_run_on_a_channel_not_kept_names_it(client: TestClient, measurement_mf4: bytes) -> None:
+    from tests.support.server import run_body
+
+    dataset = upload(client, measurement_mf4, channels="fast,mode").json()
+    response = client.post("/api/runs", json=run_body(dataset["id"], signals={"y": "lambda"}))
+    assert response.status_code == 422, response.text
+    assert "'lambda'" in response.json()["error"]["message"]
+
+
+@pytest.mark.parametrize(
+    ("form", "field", "message"),
+    [
+        ({"raster": "fast"}, "raster", "raster 'fast' is not understood"),
+        ({"raster": "channel:nope"}, "raster", "raster channel 'nope'"),
+        ({"raster": "0.1us"}, "raster", "choose a slower raster"),
+        ({"channels": "fast,nope"}, "channels", "'nope' not in the file"),
+        ({"channels": "[1, 2]"}, "channels", "JSON array of strings"),
+    ],
+)
+def test_bad_raster_or_channels_are_refused_and_nothing_is_stored(
+    client: TestClient,
+    database_url: str,
+    measurement_mf4: bytes,
+    form: dict,
+    field: str,
+    message: str,
+) -> None:
+    before = _count(database_url)
+    response = upload(client, measurement_mf4, **form)
+    assert response.status_code == 422, response.text
+    error = response.json()["error"]
+    assert error["field"] == field
+    assert message in error["message"]
+    assert _count(database_url) == before
+
+
+def test_sparse_csv_export_upload(client: TestClient, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    from tests.support.measurements import (
+        NMOT,
+        T100,
+        Measurement,
+        write_measurement,
+        write_sparse_csv,
+    )
+
+    measurement: Measurement = write_measurement(tmp_path, "3.30")
+    csv_path = write_sparse_csv(tmp_path, measurement, ["fast", "mode", NMOT])
+    response = upload(client, csv_path.read_bytes(), name="export.csv")
+    assert response.status_code == 201, response.text
+    doc = response.json()
+    assert (doc["source"], doc["time_column"], doc["rows"]) == ("csv", "timestamps", T100.size)
+    assert [c["name"] for c in doc["channels"]] == ["fast", "mode", NMOT]
+    assert any("held (previous value) ['mode']" in n for n in doc["notes"])

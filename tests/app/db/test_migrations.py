@@ -27,7 +27,7 @@ def _drift(url: str) -> list:
 def test_one_head() -> None:
     script = ScriptDirectory.from_config(alembic_config("sqlite://"))
     assert script.get_heads() == [head_revision()]
-    assert head_revision() == "0005"
+    assert head_revision() == "0007"
 
 
 def test_upgraded_empty_database_matches_the_models(backend: str, fresh_url) -> None:  # type: ignore[no-untyped-def]
@@ -210,3 +210,76 @@ def test_ids_are_not_reused_through_the_api(client) -> None:  # type: ignore[no-
     response = client.post("/api/datasets/simulate", json=body)
     assert response.status_code == 201
     assert response.json()["id"] > ids[1]
+
+
+def test_0006_adds_the_ecus_table_and_its_downgrade_drops_only_it(
+    backend: str,
+    fresh_url,  # type: ignore[no-untyped-def]
+) -> None:
+    from sqlalchemy import inspect
+
+    url = fresh_url(backend)
+    upgrade(url, "0005")
+
+    def tables() -> set[str]:
+        engine = make_engine(url)
+        try:
+            return set(inspect(engine).get_table_names()) - {"alembic_version"}
+        finally:
+            engine.dispose()
+
+    before = tables()
+    assert "ecus" not in before
+    upgrade(url, "0006")
+    assert tables() == before | {"ecus"}
+    engine = make_engine(url)
+    try:
+        columns = {c["name"] for c in inspect(engine).get_columns("ecus")}
+    finally:
+        engine.dispose()
+    assert columns == {
+        "id", "name", "a2l_sha256", "a2l", "characteristics", "values_format", "values",
+        "created_at",
+    }  # fmt: skip
+    command.downgrade(alembic_config(url), "0005")
+    assert tables() == before
+
+
+def test_0007_adds_dataset_notes_and_older_datasets_have_none(
+    backend: str,
+    fresh_url,  # type: ignore[no-untyped-def]
+) -> None:
+    """A dataset stored before 0007 reads as having nothing to say (``notes`` NULL); the
+    downgrade drops only that column and keeps the row."""
+    from datetime import UTC, datetime
+
+    from sqlalchemy import MetaData, inspect, select
+
+    url = fresh_url(backend)
+    upgrade(url, "0006")
+    engine = make_engine(url)
+    try:
+        meta = MetaData()
+        meta.reflect(engine, only=["datasets"])
+        with engine.begin() as connection:
+            connection.execute(
+                meta.tables["datasets"].insert(),
+                {"id": 3, "name": "old", "source": "csv", "rows": 2, "rate_hz": 1.0,
+                 "duration_s": 1.0, "time_column": "time", "channels": [{"name": "y"}],
+                 "payload": b"npz", "created_at": datetime(2026, 1, 2, tzinfo=UTC)},
+            )  # fmt: skip
+        before = {c["name"] for c in inspect(engine).get_columns("datasets")}
+        engine.dispose()
+        upgrade(url, "0007")
+        assert {c["name"] for c in inspect(engine).get_columns("datasets")} == before | {"notes"}
+        with engine.connect() as connection:
+            row = connection.execute(text("SELECT name, notes FROM datasets")).one()
+        assert tuple(row) == ("old", None)
+        engine.dispose()
+        command.downgrade(alembic_config(url), "0006")
+        assert {c["name"] for c in inspect(engine).get_columns("datasets")} == before
+        with engine.connect() as connection:
+            names = connection.execute(select(meta.tables["datasets"].c.name)).scalars().all()
+        assert names == ["old"]
+    finally:
+        engine.dispose()

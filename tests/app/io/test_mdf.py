@@ -1,5 +1,6 @@
-"""MDF4 written with asammdf ingests equal (resampled where the groups' rates differ),
-and broken or hostile MDF files get the right error."""
+"""MDF4 written with asammdf ingests equal (resampled where the groups' rates differ, a
+non-finite sample masked), and broken or hostile MDF files get the right error. The
+multi-rate rules in full: test_multirate.py."""
 
 from __future__ import annotations
 
@@ -68,7 +69,9 @@ def test_integer_channels_become_float_and_text_is_skipped() -> None:
     assert any("'state' skipped" in n for n in ds.notes)
 
 
-def test_groups_at_different_rates_are_resampled_onto_the_fastest() -> None:
+def test_groups_at_different_rates_go_onto_the_slowest_or_the_chosen_raster() -> None:
+    """Default: the slowest group's timestamps (no more rows than the coarsest channel
+    has); ``raster`` takes a rate instead. Both within the span all groups cover."""
     slow_t = np.arange(0.05, 1.96, 0.1)
     temp = 80 + slow_t**2
     data = mdf_bytes(
@@ -78,11 +81,29 @@ def test_groups_at_different_rates_are_resampled_onto_the_fastest() -> None:
         ]
     )
     ds = ingest(data)
-    keep = (slow_t[0] <= TIME) & (slow_t[-1] >= TIME)
-    np.testing.assert_array_equal(ds.signals.time, TIME[keep])
-    np.testing.assert_array_equal(ds.signals["rpm"], RPM[keep])
-    np.testing.assert_allclose(ds.signals["temp"], np.interp(TIME[keep], slow_t, temp), rtol=1e-15)
-    assert any("resampled linearly" in n for n in ds.notes)
+    np.testing.assert_array_equal(ds.signals.time, slow_t)
+    np.testing.assert_array_equal(ds.signals["temp"], temp)
+    np.testing.assert_allclose(ds.signals["rpm"], np.interp(slow_t, TIME, RPM), rtol=1e-15)
+    assert any("onto the raster of channel 'temp'" in n for n in ds.notes), ds.notes
+
+    fast = ingest(data, raster="100Hz")
+    grid = slow_t[0] + 0.01 * np.arange(191)
+    np.testing.assert_allclose(fast.signals.time, grid, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(fast.signals["rpm"], np.interp(grid, TIME, RPM), rtol=1e-12)
+    np.testing.assert_allclose(fast.signals["temp"], np.interp(grid, slow_t, temp), rtol=1e-15)
+    assert any("onto the 10 ms raster" in n for n in fast.notes), fast.notes
+
+
+def test_a_non_finite_sample_is_masked_not_refused() -> None:
+    nan = RPM.copy()
+    nan[17] = np.nan
+    ds = ingest(mdf_bytes([[Signal(nan, TIME, name="rpm"), Signal(LOAD, TIME, name="load")]]))
+    assert ds.masked == {"rpm": 1}
+    np.testing.assert_array_equal(ds.signals.time, TIME)
+    np.testing.assert_array_equal(ds.signals["load"], LOAD)
+    assert ds.signals["rpm"][17] == pytest.approx((RPM[16] + RPM[18]) / 2, rel=1e-12)
+    np.testing.assert_array_equal(np.delete(ds.signals["rpm"], 17), np.delete(RPM, 17))
+    assert any("'rpm': 1 of 200 samples masked" in n for n in ds.notes), ds.notes
 
 
 def test_mdf3_reads_too(tmp_path) -> None:
@@ -106,8 +127,6 @@ def bad_mdfs() -> list:
     zipped = mdf_bytes(
         [[Signal(np.zeros(200_000), np.arange(200_000) * 0.01, name="z")]], compression=2
     )
-    nan = RPM.copy()
-    nan[17] = np.nan
     return [
         (
             "truncated",
@@ -131,18 +150,18 @@ def bad_mdfs() -> list:
             "version '9.99'",
         ),
         (
-            "NaN sample",
-            mdf_bytes([[Signal(nan, TIME, name="rpm")]]),
+            "no finite sample",
+            mdf_bytes([[Signal(np.full(TIME.size, np.nan), TIME, name="rpm")]]),
             "validation_error",
-            "rpm",
-            "non-finite value (nan) at sample 17",
+            "file",
+            "no channel has usable samples",
         ),
         (
             "duplicate time",
             mdf_bytes([[Signal(RPM[:3], np.array([0.0, 0.1, 0.1]), name="x")]]),
             "validation_error",
             "time",
-            "duplicate time",
+            "channel group 0: time must be strictly increasing: duplicate time",
         ),
         (
             "only text",

@@ -1,9 +1,11 @@
 /**
  * Section 4: the table grid (axes, breakpoints, start values or a base map) for estimators
- * that adapt a table, fitted to the dataset's preview. Other estimators hide the section.
+ * that adapt a table, fitted to the dataset's preview, or taken from an ECU map
+ * (ecu-prefill.js). Other estimators hide the section.
  */
 import { gridEditor } from "../../grid-editor.js";
 import { guessTable, needsTable } from "../../mapping.js";
+import { prefillGrid } from "./ecu-prefill.js";
 import { channels, selectedEstimators } from "./state.js";
 
 /** Show the grid editor when a chosen estimator needs a table; a new one per dataset. */
@@ -17,7 +19,21 @@ export function renderTable(view) {
   if (state.grid && state.grid.datasetId === state.datasetId) return state.grid.redraw();
   state.grid?.destroy();
   const savedAxes = draft?.grid?.axes?.map((a) => a.name);
-  const saved = draft?.grid && sameNames(savedAxes, wanted) ? draft.grid : null;
+  // A column just picked for an ECU axis, else the draft of a reload, else the ECU's map.
+  const prefill = prefillGrid(view);
+  const fromEcu =
+    prefill &&
+    sameNames(
+      prefill.axes.map((a) => a.name),
+      wanted,
+    )
+      ? prefill
+      : null;
+  const saved =
+    (view.ecu?.pending && fromEcu) ||
+    (draft?.grid && sameNames(savedAxes, wanted) ? draft.grid : null) ||
+    fromEcu;
+  if (view.ecu) view.ecu.pending = null;
   if (draft) draft.grid = null;
   const g = gridEditor({
     channels: chans,

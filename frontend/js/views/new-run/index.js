@@ -24,6 +24,7 @@ import { SCOPE } from "../../scopes.js";
 import { batchPicker, renderBatch } from "./batch-form.js";
 import { renderConfig, selectTab } from "./config-form.js";
 import { draftKeeper, takeDraft } from "./draft.js";
+import { ecuFromQuery, renderEcuBanner } from "./ecu-prefill.js";
 import { renderTable } from "./grid.js";
 import { runOptions } from "./options.js";
 import { datasetPicker, loadDataset, renderEstimators, renderSignals } from "./picker.js";
@@ -45,6 +46,8 @@ export async function mount(root, ctx) {
   // The draft of this form from before a reload (same dataset only); each part is used once.
   const draft = takeDraft(state);
   const view = { ctx, catalog, datasets, baseMaps, scenarioList, state, draft };
+  // "Adapt this map" of the ECU view: the table comes from the A2L (ecu-prefill.js).
+  view.ecu = ecuFromQuery(ctx.query);
   view.renderAll = () => renderAll(view);
   view.syncUrl = () => syncUrl(view);
   view.updateSubmit = () => updateSubmit(view);
@@ -130,6 +133,7 @@ function buildForm(view) {
     config: h("div"),
     sweep: h("div", { "data-sweep-form": "" }),
     tableSection: h("div", { "data-table-section": "" }),
+    ecu: h("div", { "data-ecu-prefill": "" }),
   };
   view.hosts = hosts;
   view.datasetPicker = datasetPicker(view);
@@ -151,6 +155,7 @@ function buildForm(view) {
     h(
       "div",
       { class: "stack" },
+      hosts.ecu,
       section(1, "Data", hosts.dataset, "sec-data"),
       section(2, "Estimators", hosts.estimators, "sec-est"),
       section(3, "Signals", hosts.signals, "sec-signals"),
@@ -174,6 +179,7 @@ function renderAll(view) {
   renderBatch(view);
   renderSignals(view);
   renderTable(view);
+  renderEcuBanner(view);
   renderConfig(view);
   renderSweep(view);
   view.options.gates.render();
@@ -224,6 +230,7 @@ function syncUrl(view) {
   const axes = state.grid ? state.grid.snapshot().axes.map((a) => a.name) : state.axes;
   if (axes.length) query.axes = axes.join(",");
   if (state.mode !== "single") query.mode = state.mode;
+  if (view.ecu) Object.assign(query, { ecu: view.ecu.ecuId, map: view.ecu.map });
   if (state.mode === "batch" && state.batch.size) {
     query.datasets = [...state.batch].sort((a, b) => a - b).join(",");
   }

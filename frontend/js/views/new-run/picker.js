@@ -6,6 +6,7 @@
 import { api } from "../../api.js";
 import { fmt, fmtDuration, fmtInt, h, withUnit } from "../../dom.js";
 import { guessColumn, guessTable, KIND_TITLES, rolesOf } from "../../mapping.js";
+import { loadTemplate } from "./ecu-prefill.js";
 import { channels, selectedEstimators } from "./state.js";
 
 /* ---------- 1. dataset ---------- */
@@ -53,6 +54,7 @@ export async function loadDataset(view) {
   state.preview = await api
     .get(`/api/datasets/${d.id}/preview`, { query: { points: 400 }, signal: ctx.signal })
     .catch(() => null);
+  await loadTemplate(view);
   if (!state.chosen.size) {
     const first =
       suggestedFor(view, d).find((n) => view.catalog.some((e) => e.name === n)) ??

@@ -9,6 +9,7 @@ import { SEL, SELECT } from "../../constants.js";
 import { toast } from "../../dom.js";
 import { needsTable, rolesOf } from "../../mapping.js";
 import { readBatch } from "./batch-form.js";
+import { calibrationOf } from "./ecu-prefill.js";
 import { fieldError, selectedEstimators } from "./state.js";
 import { dropKey, readSweep } from "./sweep-request.js";
 
@@ -26,6 +27,9 @@ function bodyFor(view, est, shared) {
     if (shared.grid.locked) config.locked = shared.grid.locked;
     // Typed or imported start values replace the constant θ0 (the API keeps an explicit θ0).
     if (body.table.values || body.base_map_id) delete config.theta0;
+    // A map from an ECU's A2L: the run keeps the link its CDFX and image exports need.
+    const calibration = calibrationOf(view);
+    if (calibration) body.calibration = calibration;
   }
   const name = view.options.name();
   if (name) body.name = selectedEstimators(view).length > 1 ? `${name} · ${est.name}` : name;
@@ -127,7 +131,8 @@ async function submitGroup(view, est) {
     reportErrors(view, problems);
     return;
   }
-  const { base_map_id: _base, dataset_id: datasetId, ...common } = body;
+  // Sweeps and batches keep no calibration link (their runs export DCM, CSV, JSON).
+  const { base_map_id: _base, calibration: _cal, dataset_id: datasetId, ...common } = body;
   let path;
   let payload;
   if (state.mode === "sweep") {

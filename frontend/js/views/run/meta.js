@@ -79,6 +79,7 @@ export function runMeta(v, { onCancel, onResume }) {
     versionId: () => v.timeline?.viewing?.id ?? null,
     errorHost: v.root,
     signal: v.ctx.signal,
+    calibration: run.calibration ?? run.table?.calibration ?? null,
   });
   const versionsLink = h(
     "a",
