@@ -11,7 +11,6 @@ list of characteristics beside the heatmap of its stored values in its unit.
 
 from __future__ import annotations
 
-import argparse
 import sys
 import tempfile
 from pathlib import Path
@@ -20,9 +19,8 @@ from urllib.parse import quote
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from playwright.sync_api import sync_playwright  # noqa: E402
-
-from tests.frontend.browser import CHROMIUM, CHROMIUM_ARGS, VIEWPORT, start_server  # noqa: E402
+from scripts.page_shot import capture, chromium_missing, open_page, parse_args  # noqa: E402
+from tests.frontend.browser import start_server  # noqa: E402
 from tests.frontend.ecu_files import MAP_NAME, write_files  # noqa: E402
 
 #: Parsing the demo A2L takes seconds (pya2ldb), tens on a busy machine.
@@ -30,15 +28,8 @@ UPLOAD_TIMEOUT_S = 300.0
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--out", type=Path, default=ROOT / "docs" / "img" / "ecu-view.png")
-    parser.add_argument("--theme", choices=["dark", "light"], default="dark")
-    args = parser.parse_args(argv)
-    if not CHROMIUM.exists():
-        print(
-            "ecu_screenshot: error: /usr/bin/chromium is missing (apt-get install chromium)",
-            file=sys.stderr,
-        )
+    args = parse_args(argv, __doc__, ROOT / "docs" / "img" / "ecu-view.png")
+    if chromium_missing("ecu_screenshot"):
         return 2
 
     with tempfile.TemporaryDirectory(prefix="mapwise-shot-") as tmp:
@@ -54,17 +45,11 @@ def main(argv: list[str] | None = None) -> int:
                     )
                 r.raise_for_status()
                 ecu_id = r.json()["id"]
-            with sync_playwright() as p:
-                browser = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-                page = browser.new_page(viewport=VIEWPORT, color_scheme=args.theme)
-                page.goto(f"{server.url}/ecus/{ecu_id}?map={quote(MAP_NAME)}")
+            url = f"{server.url}/ecus/{ecu_id}?map={quote(MAP_NAME)}"
+            with open_page(url, args.theme) as page:
                 page.locator('[data-plot="ecu-map"] .main-svg').first.wait_for()
                 page.locator("[data-map-list] [data-map]").first.wait_for()
-                page.mouse.move(5, 890)  # no hover labels in the picture
-                page.wait_for_timeout(400)
-                args.out.parent.mkdir(parents=True, exist_ok=True)
-                page.screenshot(path=str(args.out))
-                browser.close()
+                capture(page, args.out)
         finally:
             server.stop()
     print(f"wrote {args.out}")

@@ -10,7 +10,6 @@ the operating-point trail and the active cell on the map.
 
 from __future__ import annotations
 
-import argparse
 import sys
 import tempfile
 import time
@@ -19,15 +18,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from playwright.sync_api import sync_playwright  # noqa: E402
-
-from tests.frontend.browser import (  # noqa: E402
-    CHROMIUM,
-    CHROMIUM_ARGS,
-    VIEWPORT,
-    start_server,
-    upload_example,
-)
+from scripts.page_shot import capture, chromium_missing, open_page, parse_args  # noqa: E402
+from tests.frontend.browser import start_server, upload_example  # noqa: E402
 
 # The 12×18 NOx grid and SKF settings of the SKF paper's example (SKF (34)).
 SPEED_RPM = [750, 780, 1000, 1250, 1500, 1750, 2000, 2500, 3000, 3500, 4000, 4500]
@@ -54,15 +46,8 @@ CAPTURE_AT = 0.62  # fraction of the log processed when the picture is taken
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--out", type=Path, default=ROOT / "docs" / "screenshot.png")
-    parser.add_argument("--theme", choices=["dark", "light"], default="dark")
-    args = parser.parse_args(argv)
-    if not CHROMIUM.exists():
-        print(
-            "screenshot: error: /usr/bin/chromium is missing (apt-get install chromium)",
-            file=sys.stderr,
-        )
+    args = parse_args(argv, __doc__, ROOT / "docs" / "screenshot.png")
+    if chromium_missing("screenshot"):
         return 2
 
     with tempfile.TemporaryDirectory(prefix="mapwise-shot-") as tmp:
@@ -73,21 +58,14 @@ def main(argv: list[str] | None = None) -> int:
                 r = api.post("/api/runs", json={"dataset_id": dataset["id"], **RUN})
                 r.raise_for_status()
                 run_id = r.json()["id"]
-                with sync_playwright() as p:
-                    browser = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-                    page = browser.new_page(viewport=VIEWPORT, color_scheme=args.theme)
-                    page.goto(f"{server.url}/runs/{run_id}")
+                with open_page(f"{server.url}/runs/{run_id}", args.theme) as page:
                     page.locator('[data-plot="map"] .main-svg').first.wait_for()
                     deadline = time.monotonic() + 120
                     while api.get(f"/api/runs/{run_id}").json()["progress"] < CAPTURE_AT:
                         if time.monotonic() > deadline:
                             raise RuntimeError("the run did not progress")
                         time.sleep(0.2)
-                    page.mouse.move(5, 890)  # no hover labels in the picture
-                    page.wait_for_timeout(400)
-                    args.out.parent.mkdir(parents=True, exist_ok=True)
-                    page.screenshot(path=str(args.out))
-                    browser.close()
+                    capture(page, args.out)
         finally:
             server.stop()
     print(f"wrote {args.out}")

@@ -29,20 +29,6 @@ _CODES = {
     "FLOAT64_IEEE": "f8",
 }
 _ORDERS = {"MSB_FIRST": ">", "BIG_ENDIAN": ">", "MSB_LAST": "<", "LITTLE_ENDIAN": "<"}
-# The ALIGNMENT_* keyword of MOD_COMMON / RECORD_LAYOUT that governs each data type.
-ALIGNMENT_KEY = {
-    "UBYTE": "BYTE",
-    "SBYTE": "BYTE",
-    "UWORD": "WORD",
-    "SWORD": "WORD",
-    "ULONG": "LONG",
-    "SLONG": "LONG",
-    "A_UINT64": "INT64",
-    "A_INT64": "INT64",
-    "FLOAT16_IEEE": "FLOAT16_IEEE",
-    "FLOAT32_IEEE": "FLOAT32_IEEE",
-    "FLOAT64_IEEE": "FLOAT64_IEEE",
-}
 
 
 @dataclass(frozen=True, slots=True)

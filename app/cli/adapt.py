@@ -61,22 +61,29 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--sigma-w", type=float, help="random-walk σw per cell and sample")
     p.add_argument("--sigma-v", type=float, help="measurement noise σv")
+    p.add_argument("--sigma-f", type=float, help="process noise σf of the sensor state")
+    add_filter_arguments(p)
+    p.add_argument("--gate-sigma", type=float, help="reject samples with |e| > K·sqrt(s)")
+    p.add_argument("--out", type=Path, metavar="MAP.json", help="write the map document here")
+    p.add_argument("--json", action="store_true", help="print the map document on stdout")
+    adapt_a2l.add_arguments(p)
+    p.set_defaults(handler=run_command)
+
+
+def add_filter_arguments(p: argparse.ArgumentParser) -> None:
+    """The map filter's options other than its noise levels, shared by ``adapt`` and ``tune``:
+    initial state, covariance limiting, sensor lag/delay, time column, RLS/NLMS steps, locks.
+    """
     p.add_argument("--p0", type=float, help="initial variance of every cell")
     p.add_argument("--theta0", type=float, help="initial value of every cell")
     p.add_argument("--limit", choices=["none", "p0"], help="covariance limiting")
     p.add_argument("--lag", type=float, help="sensor lag pole a (0 ≤ a < 1)")
     p.add_argument("--delay-s", type=float, help="sensor delay in seconds (needs --time)")
     p.add_argument("--delay-samples", type=int, help="sensor delay in samples")
-    p.add_argument("--sigma-f", type=float, help="process noise σf of the sensor state")
     p.add_argument("--time", metavar="COLUMN", help="time column in seconds")
     p.add_argument("--forgetting", type=float, help="RLS forgetting factor λ")
     p.add_argument("--mu", type=float, help="NLMS step size μ")
     p.add_argument("--lock", metavar="CELLS", help='locked cells, 0-based: "i,j;i,j"')
-    p.add_argument("--gate-sigma", type=float, help="reject samples with |e| > K·sqrt(s)")
-    p.add_argument("--out", type=Path, metavar="MAP.json", help="write the map document here")
-    p.add_argument("--json", action="store_true", help="print the map document on stdout")
-    adapt_a2l.add_arguments(p)
-    p.set_defaults(handler=run_command)
 
 
 def run_command(args: argparse.Namespace) -> int:

@@ -24,7 +24,13 @@ import time
 from pathlib import Path
 from typing import Any
 
-from app.cli.adapt import AdaptRequest, build_config, parse_axis, parse_cells
+from app.cli.adapt import (
+    AdaptRequest,
+    add_filter_arguments,
+    build_config,
+    parse_axis,
+    parse_cells,
+)
 from app.cli.errors import UsageError
 from estimation.holdout import DEFAULT_FIT_FRACTION, holdout_error
 from estimation.registry import EstimatorKind, names
@@ -53,16 +59,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--sigma-w", type=float, help="start of σw (default: σv's start / 10)")
     p.add_argument("--sigma-v", type=float, help="start of σv (default: the log's noise scale)")
     p.add_argument("--sigma-f", type=float, help="start of σf (default: σv's start)")
-    p.add_argument("--p0", type=float, help="initial variance of every cell")
-    p.add_argument("--theta0", type=float, help="initial value of every cell")
-    p.add_argument("--limit", choices=["none", "p0"], help="covariance limiting")
-    p.add_argument("--lag", type=float, help="sensor lag pole a (0 ≤ a < 1)")
-    p.add_argument("--delay-s", type=float, help="sensor delay in seconds (needs --time)")
-    p.add_argument("--delay-samples", type=int, help="sensor delay in samples")
-    p.add_argument("--time", metavar="COLUMN", help="time column in seconds")
-    p.add_argument("--forgetting", type=float, help="RLS forgetting factor λ")
-    p.add_argument("--mu", type=float, help="NLMS step size μ")
-    p.add_argument("--lock", metavar="CELLS", help='locked cells, 0-based: "i,j;i,j"')
+    add_filter_arguments(p)
     p.add_argument(
         "--max-evals",
         type=int,

@@ -187,6 +187,45 @@ export function toast(message, { error = false, ms = 4000 } = {}) {
   setTimeout(() => el.remove(), ms);
 }
 
+/**
+ * The bar of an upload form (role=progressbar, 0-100 in aria-valuenow): `el` goes in the
+ * form; `start()` shows it empty, `set(f)` fills fraction f, `finish(ok)` ends it full and
+ * green or red.
+ */
+export function uploadProgress() {
+  const bar = h("span");
+  const el = h(
+    "div",
+    {
+      class: "progress",
+      hidden: true,
+      role: "progressbar",
+      "aria-label": "Upload progress",
+      "aria-valuemin": "0",
+      "aria-valuemax": "100",
+      "aria-valuenow": "0",
+    },
+    bar,
+  );
+  const set = (f) => {
+    bar.style.width = `${Math.round(f * 100)}%`;
+    el.setAttribute("aria-valuenow", String(Math.round(f * 100)));
+  };
+  return {
+    el,
+    set,
+    start() {
+      el.hidden = false;
+      el.classList.remove("ok", "bad");
+      set(0);
+    },
+    finish(ok) {
+      if (ok) set(1);
+      el.classList.add(ok ? "ok" : "bad");
+    },
+  };
+}
+
 /** Page header used by every view. */
 export function pageHead({ title, sub, crumbs, actions = [] }) {
   return h(

@@ -56,6 +56,17 @@ def write_files(folder: Path) -> tuple[Path, Path, Path]:
     return a2l, hex_path, csv
 
 
+def memory(image: bytes) -> dict[int, int]:
+    """The bytes of an Intel HEX image by address (to compare an image before and after)."""
+    binfile = bincopy.BinFile()
+    binfile.add_ihex(image.decode())
+    return {
+        segment.minimum_address + i: byte
+        for segment in binfile.segments
+        for i, byte in enumerate(segment.data)
+    }
+
+
 def drive_log(
     rate_hz: float = 50.0, duration_s: float = 60.0, seed: int = 3, y_column: str = Y_QUANTITY
 ) -> str:

@@ -7,7 +7,7 @@
 import { api, clearErrors, showError } from "../api.js";
 import { SELECT } from "../constants.js";
 import { needs, SCOPE } from "../scopes.js";
-import { card, fmtBytes, fmtInt, h, icon, ICONS, splitHeader } from "../dom.js";
+import { card, fmtBytes, fmtInt, h, icon, ICONS, splitHeader, uploadProgress } from "../dom.js";
 
 /** The masked samples of a dataset, all channels together (0 when none were masked). */
 export function maskedTotal(dataset) {
@@ -78,20 +78,7 @@ export function uploadCard(ctx, onCreated) {
   });
   const fileInfo = h("div", { class: "upload-file", hidden: true });
   const columns = h("div", { "data-upload-columns": "" });
-  const bar = h("span");
-  const progress = h(
-    "div",
-    {
-      class: "progress",
-      hidden: true,
-      role: "progressbar",
-      "aria-label": "Upload progress",
-      "aria-valuemin": "0",
-      "aria-valuemax": "100",
-      "aria-valuenow": "0",
-    },
-    bar,
-  );
+  const progress = uploadProgress();
   const submit = h(
     "button",
     { type: "submit", class: "primary", disabled: true },
@@ -142,7 +129,7 @@ export function uploadCard(ctx, onCreated) {
       ),
     ),
     h("div", { class: "banner error", "data-form-error": "", hidden: true }),
-    progress,
+    progress.el,
     h("div", { class: "row end", style: { marginTop: "12px" } }, submit),
   );
 
@@ -190,20 +177,13 @@ export function uploadCard(ctx, onCreated) {
     if (rasterInput.value.trim()) body.append("raster", rasterInput.value.trim());
     if (channelsInput.value.trim()) body.append("channels", channelsInput.value.trim());
     submit.disabled = true;
-    progress.hidden = false;
-    progress.classList.remove("ok", "bad");
-    const setProgress = (f) => {
-      bar.style.width = `${Math.round(f * 100)}%`;
-      progress.setAttribute("aria-valuenow", String(Math.round(f * 100)));
-    };
-    setProgress(0);
+    progress.start();
     try {
       const dataset = await api.upload("/api/datasets", body, {
-        onProgress: setProgress,
+        onProgress: progress.set,
         signal: ctx.signal,
       });
-      setProgress(1);
-      progress.classList.add("ok");
+      progress.finish(true);
       file = null;
       fileInput.value = "";
       nameInput.value = "";
@@ -211,7 +191,7 @@ export function uploadCard(ctx, onCreated) {
       columns.replaceChildren();
       await onCreated(dataset);
     } catch (err) {
-      progress.classList.add("bad");
+      progress.finish(false);
       showUploadError(form, err);
     } finally {
       submit.disabled = !file;

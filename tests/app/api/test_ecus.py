@@ -289,7 +289,7 @@ def test_linked_run_exports_dcm_cdfx_and_a_patched_image(
     assert np.array_equal(cdfx[MAP].axes[0], ef.X_POINTS)
 
     patched = export("image")
-    before, after = _memory(hex_image), _memory(patched)
+    before, after = ef.memory(hex_image), ef.memory(patched)
     assert before.keys() == after.keys()
     changed = [a for a in before if before[a] != after[a]]
     assert changed
@@ -342,13 +342,3 @@ def test_the_a2l_cache_keeps_within_its_bounds(tmp_path: Path) -> None:
     assert (removed, left) == (2, [".", "a", "d"])
     removed = prune(CacheLimits(tmp_path, max_files=1, max_bytes=10**6))
     assert (removed, sorted(p.name[:1] for p in tmp_path.iterdir())) == (1, [".", "d"])
-
-
-def _memory(image: bytes) -> dict[int, int]:
-    binfile = bincopy.BinFile()
-    binfile.add_ihex(image.decode())
-    return {
-        segment.minimum_address + i: byte
-        for segment in binfile.segments
-        for i, byte in enumerate(segment.data)
-    }

@@ -139,7 +139,7 @@ def test_adapt_from_the_a2l_writes_dcm_cdfx_and_the_patched_image(
 
     assert np.array_equal(read_dcm_values(out["dcm"].read_bytes())[ef.MAP_NAME].values, stored)
     assert np.array_equal(read_cdfx(out["cdfx"].read_bytes())[ef.MAP_NAME].values, stored)
-    before, after = _memory(hex_path.read_bytes()), _memory(out["hex"].read_bytes())
+    before, after = ef.memory(hex_path.read_bytes()), ef.memory(out["hex"].read_bytes())
     assert before.keys() == after.keys()
     changed = [a for a in before if before[a] != after[a]]
     assert changed
@@ -188,13 +188,3 @@ def test_adapt_calibration_flags_exit_2(files, capsys, extra, message) -> None: 
     assert (code, out) == (2, "")
     assert message in err
     assert err.count("\n") == 1
-
-
-def _memory(image: bytes) -> dict[int, int]:
-    binfile = bincopy.BinFile()
-    binfile.add_ihex(image.decode())
-    return {
-        segment.minimum_address + i: byte
-        for segment in binfile.segments
-        for i, byte in enumerate(segment.data)
-    }

@@ -1,5 +1,6 @@
 """Every map-filter run stores its truth-free metrics: held-out prediction error and NIS
-(app/runs/results.py, docs/tuning.md)."""
+(app/runs/results.py, docs/tuning.md). That a torque run stores none is checked with the
+torque run of tests/app/runs/test_runs.py."""
 
 from __future__ import annotations
 
@@ -35,18 +36,3 @@ def test_map_filter_run_stores_holdout_and_nis_metrics(client: TestClient, tmp_p
     assert metrics["holdout:samples"] == np.count_nonzero(signals["temp"][2100:] >= 70.0)
     assert metrics["nis:mean_band_low"] < 1.0 < metrics["nis:mean_band_high"]
     assert {"output_rmse", "coverage", "samples", "accepted", "run_s"} <= set(metrics)
-
-
-def test_torque_runs_have_no_holdout_metrics(client: TestClient) -> None:
-    dataset = client.post(
-        "/api/datasets/simulate", json={"scenario": "torque-si", "duration_s": 3.0}
-    ).json()
-    body = {
-        "dataset_id": dataset["id"],
-        "estimator": "uio",
-        "signals": {},
-        "config": {},
-    }
-    done = wait_run(client, start_run(client, body)["id"])
-    assert done["status"] == "succeeded", done["error"]
-    assert not any(k.startswith(("holdout:", "nis:")) for k in done["metrics"])

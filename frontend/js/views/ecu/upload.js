@@ -5,7 +5,7 @@
  * problem belongs to ("a2l" or "values"); the message is shown next to that file input.
  */
 import { api, clearErrors, showError } from "../../api.js";
-import { card, fmtBytes, h, icon, ICONS, toast } from "../../dom.js";
+import { card, fmtBytes, h, icon, ICONS, toast, uploadProgress } from "../../dom.js";
 import { needs, SCOPE } from "../../scopes.js";
 
 /** What the values input accepts (the API detects the format from the content). */
@@ -26,20 +26,7 @@ export function uploadCard({ signal, onCreated }) {
     name: "name",
     placeholder: "defaults to the A2L file name",
   });
-  const bar = h("span");
-  const progress = h(
-    "div",
-    {
-      class: "progress",
-      hidden: true,
-      role: "progressbar",
-      "aria-label": "Upload progress",
-      "aria-valuemin": "0",
-      "aria-valuemax": "100",
-      "aria-valuenow": "0",
-    },
-    bar,
-  );
+  const progress = uploadProgress();
   const submit = h(
     "button",
     { type: "submit", class: "primary", disabled: true, "data-ecu-upload": "" },
@@ -70,7 +57,7 @@ export function uploadCard({ signal, onCreated }) {
     ),
     h("div", { class: "field" }, h("label", { for: "ecu-name" }, "Name"), nameInput),
     h("div", { class: "banner error", "data-form-error": "", hidden: true }),
-    progress,
+    progress.el,
     h("div", { class: "row end", style: { marginTop: "12px" } }, submit),
   );
 
@@ -97,24 +84,17 @@ export function uploadCard({ signal, onCreated }) {
     if (values) body.append("values", values, values.name);
     body.append("name", nameInput.value.trim() || a2l.name.replace(/\.[^.]+$/, ""));
     submit.disabled = true;
-    progress.hidden = false;
-    progress.classList.remove("ok", "bad");
-    const setProgress = (f) => {
-      bar.style.width = `${Math.round(f * 100)}%`;
-      progress.setAttribute("aria-valuenow", String(Math.round(f * 100)));
-    };
-    setProgress(0);
+    progress.start();
     try {
-      const ecu = await api.upload("/api/ecus", body, { onProgress: setProgress, signal });
-      setProgress(1);
-      progress.classList.add("ok");
+      const ecu = await api.upload("/api/ecus", body, { onProgress: progress.set, signal });
+      progress.finish(true);
       form.reset();
       a2lInfo.textContent = "";
       valuesInfo.textContent = "";
       showNotes(ecu);
       onCreated(ecu);
     } catch (err) {
-      progress.classList.add("bad");
+      progress.finish(false);
       showError(form, err);
     } finally {
       submit.disabled = !a2lInput.files[0];
