@@ -6,7 +6,15 @@
 #                              killed processes or a soak (< 3 min on 2 cores)
 #
 # Both lanes also check formatting (ruff, prettier) and build the docs (mkdocs --strict).
-# Extra arguments go to pytest (scripts/test.sh --fast -k skf; scripts/test.sh tests/app/db).
+# Extra arguments go to pytest (scripts/test.sh --fast -k skf; scripts/test.sh tests/app/db);
+# a marker expression among them (-m EXPR) narrows the lane's own.
+#
+# The whole suite runs in two phases: first every test not marked `serial`, spread over
+# $MAPWISE_TEST_JOBS pytest-xdist workers (default 3; a test file stays on one worker, so its
+# module-scoped servers and databases start once), then the `serial` tests one at a time (they
+# bound latency, loop lag or frame rates, or restart the shared PostgreSQL). The phases'
+# marker expressions are complements, so every collected test runs in exactly one of them.
+#
 # The whole suite first makes sure of Chromium and a running PostgreSQL (system-deps.sh, which
 # installs only what is missing). Both lanes install mapwise with its test dependencies into
 # ./.venv, again only when pyproject.toml changed since the last install (a stamp in .venv).
@@ -19,6 +27,25 @@ if [ "${1:-}" = "--fast" ]; then
     fast=1
     shift
 fi
+marks=""  # the caller's -m, combined with each lane's or phase's expression below
+args=()
+while [ "$#" -gt 0 ]; do
+    case "$1" in
+        -m) marks="${2:?-m needs a marker expression}"; shift 2 ;;
+        -m*) marks="${1#-m}"; shift ;;
+        *) args+=("$1"); shift ;;
+    esac
+done
+
+# Runs pytest on the marker expression $1 (and the caller's -m) with the remaining arguments.
+pytest_on() {
+    local expression="$1"
+    shift
+    if [ -n "$marks" ]; then
+        expression="($marks) and ($expression)"
+    fi
+    .venv/bin/pytest -m "$expression" "$@" ${args[@]+"${args[@]}"}
+}
 
 if [ "$fast" -eq 0 ]; then
     bash scripts/system-deps.sh
@@ -47,13 +74,27 @@ NO_MKDOCS_2_WARNING=1 .venv/bin/mkdocs build --strict --quiet -d "$(mktemp -d)"
 
 if [ "$fast" -eq 1 ]; then
     status=0
-    .venv/bin/pytest -m "$FAST_LANE" "$@" || status=$?
+    pytest_on "$FAST_LANE" || status=$?
     if [ "$status" -eq 5 ]; then  # the arguments picked only tests outside the fast lane
         echo "test.sh --fast: no fast-lane test matches; run them with scripts/test.sh" >&2
         exit 0
     fi
     exit "$status"
 fi
-# The whole suite: a skipped test fails the run (tests/conftest.py), and pytest's exit code 5
-# (nothing collected) is an error like any other non-zero status.
-exec .venv/bin/pytest --fail-on-skip "$@"
+
+# The whole suite: a skipped test fails the run (tests/conftest.py). pytest's exit code 5
+# (nothing collected) is fine for one phase, since arguments may pick no serial test, but
+# an error if neither phase collected anything.
+parallel=0
+pytest_on "not serial" --fail-on-skip -n "${MAPWISE_TEST_JOBS:-3}" --dist loadfile || parallel=$?
+serial=0
+pytest_on "serial" --fail-on-skip || serial=$?
+if [ "$parallel" -eq 5 ] && [ "$serial" -eq 5 ]; then
+    exit 5
+fi
+for status in "$parallel" "$serial"; do
+    if [ "$status" -ne 0 ] && [ "$status" -ne 5 ]; then
+        exit "$status"
+    fi
+done
+exit 0

@@ -1,22 +1,67 @@
 """Suite-wide collection rules: every test under ``tests/frontend/`` drives Chromium and carries
 the ``browser`` marker, so the fast lane (``scripts/test.sh --fast``) can leave it out.
 
-The other markers (``slow``, ``postgres``, ``dask``, ``soak``) sit on the tests themselves
-or, for ``postgres``, on the PostgreSQL parameter of the ``backend`` fixture
+The other markers (``slow``, ``postgres``, ``dask``, ``soak``, ``serial``) sit on the tests
+themselves or, for ``postgres``, on the PostgreSQL parameter of the ``backend`` fixture
 (tests/app/conftest.py). docs/contributing.md lists the lanes.
 
 ``--fail-on-skip`` (what ``scripts/test.sh`` gives the whole suite) fails the run if any test
 was skipped: a missing Chromium or PostgreSQL must not pass CI as a green, smaller suite.
+Under pytest-xdist the workers' reports reach the controller's hooks, so the controller
+decides; a worker's own verdict would not reach the run's exit status.
+
+The parallel phase of the whole suite (``pytest -n N --dist loadfile``, scripts/test.sh) gets
+its own scheduler, :func:`pytest_xdist_make_scheduler`: a test file is one unit of work, so
+its module-scoped servers and databases start once, and the units start longest first
+(``LONGEST``), so that no long file starts last and keeps one worker busy alone at the end.
+The files in ``EACH_TEST_ALONE`` start a server per test and share nothing per module, so
+each of their tests is a unit of its own and they run side by side.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 FRONTEND = Path(__file__).resolve().parent / "frontend"
 _skipped: list[str] = []
+
+# Seconds each file's tests took in the parallel phase (-n 3, the junit XML's test times, on
+# 2026-12-03 with the machine shared by other jobs, so several times a quiet run's; see
+# docs/contributing.md). Only their order matters: a file missing here starts after these.
+LONGEST: dict[str, float] = {
+    "tests/estimation/test_torque_estimators.py": 1000,
+    "tests/app/runs/test_live_server.py": 600,
+    "tests/estimation/test_ekf.py": 590,
+    "tests/estimation/test_lpv.py": 520,
+    "tests/app/runs/test_attempts.py": 520,
+    "tests/app/runs/test_kill_storm.py": 500,
+    "tests/app/runs/test_isolation.py": 480,
+    "tests/app/runs/test_every_estimator.py": 480,
+    "tests/app/runs/test_runs.py": 440,
+    "tests/estimation/test_registry.py": 430,
+    "tests/app/api/test_openapi_fuzz.py": 420,
+    "tests/estimation/test_airpath_plant.py": 290,
+    "tests/app/services/test_sweeps.py": 230,
+    "tests/app/api/test_api_contract.py": 220,
+    "tests/frontend/test_views.py": 210,
+    "tests/app/runs/test_dask.py": 190,
+    "tests/frontend/test_run_view.py": 180,
+    "tests/estimation/test_torque_plant.py": 170,
+    "tests/app/cli/test_reproduce.py": 170,
+    "tests/app/api/test_auth.py": 170,
+    "tests/estimation/test_filter_state.py": 170,
+    "tests/app/db/test_migrations.py": 160,
+    "tests/frontend/test_sweeps_batches.py": 150,
+    "tests/frontend/test_contrast.py": 150,
+}
+# Each test starts its own server and the module keeps no fixture or cache: the kill storm
+# (two tests of 50 kills, about half the file's time each) and the isolation tests.
+EACH_TEST_ALONE = frozenset(
+    {"tests/app/runs/test_kill_storm.py", "tests/app/runs/test_isolation.py"}
+)
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
@@ -31,6 +76,29 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     for item in items:
         if item.path.is_relative_to(FRONTEND):
             item.add_marker(pytest.mark.browser)
+    if hasattr(config, "workerinput"):  # an xdist worker: its collection order is the queue's
+        items.sort(key=lambda item: -LONGEST.get(_file_of(item.nodeid), 0.0))
+
+
+def _file_of(nodeid: str) -> str:
+    return nodeid.split("::", 1)[0]
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
+    """``--dist loadfile``, with the units in collection order (longest first, above) instead
+    of xdist's "most tests first", and a unit per test in the ``EACH_TEST_ALONE`` files."""
+    if config.getoption("dist") != "loadfile":
+        return None
+    from xdist.scheduler import LoadFileScheduling
+
+    class LongestFirst(LoadFileScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            path = _file_of(nodeid)
+            return nodeid if path in EACH_TEST_ALONE else path
+
+    config.option.loadscopereorder = False
+    return LongestFirst(config, log)
 
 
 def pytest_runtest_logreport(report: pytest.TestReport) -> None:
@@ -45,6 +113,8 @@ def pytest_collectreport(report: pytest.CollectReport) -> None:
 
 @pytest.hookimpl(trylast=True)
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    if hasattr(session.config, "workerinput"):  # an xdist worker: the controller decides
+        return
     if session.config.getoption("--fail-on-skip") and _skipped and exitstatus == 0:
         print(f"\n--fail-on-skip: {len(_skipped)} skipped; the whole suite runs every test:")
         print("\n".join(f"  {nodeid}" for nodeid in _skipped))

@@ -3,7 +3,9 @@
 Each backend gets a fresh database per test module, migrated from empty by the app's own
 start-up, and one real app (TestClient: real ASGI app, lifespan, process pool). PostgreSQL
 is the local server (127.0.0.1:5432, trust auth, user postgres); a database
-``mapwise_test_<random>`` is created for the session and dropped at its end.
+``mapwise_test_<worker>_<random>`` is created for each module (``<worker>`` the pytest-xdist
+worker, so parallel workers never share one) and dropped at the end of the session. SQLite
+files live under pytest's temporary directory, which is per xdist worker too.
 """
 
 from __future__ import annotations

@@ -18,6 +18,9 @@ from playwright.sync_api import Page, WebSocketRoute, expect
 
 from tests.frontend.browser import plot_data, shot, upload_example, wait_run
 
+# Frame counts and rates over wall-clock windows, so alone, after the parallel phase.
+pytestmark = pytest.mark.serial
+
 STREAM = re.compile(r"/api/runs/\d+/stream")
 SKF_CONFIG = {"theta0": 300, "p0": 1e4, "sigma_w": 5, "sigma_v": 50}
 

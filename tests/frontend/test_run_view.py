@@ -9,6 +9,7 @@ import re
 import time
 import uuid
 
+import pytest
 from playwright.sync_api import Page, expect
 
 from tests.frontend.browser import plot_data, shot, upload_example
@@ -29,6 +30,7 @@ def heatmap_z(page: Page, selector: str) -> list | None:
     return next((t["z"] for t in traces if t["type"] == "heatmap"), None) if traces else None
 
 
+@pytest.mark.serial  # counts the map frames drawn while the run is live
 def test_skf_run_updates_the_map_live(page: Page, api) -> None:
     dataset = upload_example(api, f"live-{uuid.uuid4().hex[:8]}")
     page.goto(run_form_url(dataset["id"]))

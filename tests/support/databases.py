@@ -1,9 +1,14 @@
 """Fresh test databases: an empty SQLite file or a randomly named PostgreSQL database on the
 local server (127.0.0.1:5432, trust auth, user postgres), dropped at the end of the session.
-Shared by the test fixtures (tests/app/conftest.py) and ``scripts/bench_scaleout.py``."""
+Shared by the test fixtures (tests/app/conftest.py) and ``scripts/bench_scaleout.py``.
+
+A database is named ``mapwise_test_<worker>_<random>``: the pytest-xdist worker (``gw0``, …,
+``main`` outside xdist) that created it, so parallel workers never share one and each drops
+only its own."""
 
 from __future__ import annotations
 
+import os
 import secrets
 
 import psycopg
@@ -33,7 +38,8 @@ class PgDatabases:
         self.names: list[str] = []
 
     def create(self) -> str:
-        name = f"mapwise_test_{secrets.token_hex(4)}"
+        worker = os.environ.get("PYTEST_XDIST_WORKER", "main")
+        name = f"mapwise_test_{worker}_{secrets.token_hex(4)}"
         with pg_connect() as conn:
             conn.execute(f'CREATE DATABASE "{name}"')
         self.names.append(name)

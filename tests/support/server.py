@@ -2,12 +2,13 @@
 and the body of a run request. Used by the real-process tests (WebSocket, kill, load, Dask),
 the browser tests (tests/frontend/browser.py) and the scripts that start a server
 (scripts/load.py, bench_service.py, bench_scaleout.py, screenshot.py, bench_dashboard.py),
-which put the repository root on ``sys.path`` to import it. Only httpx is needed here.
+which put the repository root on ``sys.path`` to import it. It needs only httpx and psutil.
 """
 
 from __future__ import annotations
 
 import os
+import random
 import signal
 import socket
 import subprocess
@@ -18,19 +19,42 @@ from pathlib import Path
 from typing import Any
 
 import httpx
+import psutil
 
 ROOT = Path(__file__).resolve().parents[2]
 U1 = [500.0, 1500.0, 2500.0, 3500.0]
 U2 = [0.0, 20.0, 40.0, 60.0]
 TABLE = {"axes": [{"name": "u1", "breakpoints": U1}, {"name": "u2", "breakpoints": U2}]}
 FINISHED = ("succeeded", "failed", "cancelled", "interrupted")
+PORT_ATTEMPTS = 5
+
+
+class PortTakenError(RuntimeError):
+    """The server could not bind its port: another process took it after :func:`free_port`."""
+
+
+# Ports handed out by free_port: below Linux's ephemeral range (32768-60999 by default), so no
+# outgoing connection (a browser's, a database client's) can take one, split into one slice per
+# pytest-xdist worker ("gw0", "gw1", …; "" outside xdist), so two workers never pick the same.
+PORTS_LOW, PORTS_HIGH, PORTS_PER_WORKER = 20000, 32000, 1000
 
 
 def free_port() -> int:
-    """A TCP port free on 127.0.0.1 now (the OS picks it; a server binds it right after)."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+    """A TCP port free on 127.0.0.1 now, from this process's slice of ``PORTS_LOW`` …
+    ``PORTS_HIGH`` (a random one that binds; a server binds it right after, and
+    :class:`Server` retries with another if something took it meanwhile)."""
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "")
+    slices = (PORTS_HIGH - PORTS_LOW) // PORTS_PER_WORKER
+    index = int(worker[2:]) + 1 if worker.startswith("gw") else 0
+    low = PORTS_LOW + (index % slices) * PORTS_PER_WORKER
+    for port in random.sample(range(low, low + PORTS_PER_WORKER), PORTS_PER_WORKER):
+        with socket.socket() as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+            return port
+    raise RuntimeError(f"no free port in {low}-{low + PORTS_PER_WORKER - 1}")
 
 
 def run_body(
@@ -70,34 +94,44 @@ class Server:
         env: dict[str, str] | None = None,
     ) -> None:
         self.database_url = database_url
-        self.port = free_port()
-        self.base = f"http://127.0.0.1:{self.port}"
-        self.ws_base = f"ws://127.0.0.1:{self.port}"
-        args = [
-            sys.executable, "-m", "app.cli", "serve",
-            "--host", "127.0.0.1", "--port", str(self.port),
+        self.args = [
+            sys.executable, "-m", "app.cli", "serve", "--host", "127.0.0.1",
             "--database-url", database_url, "--log-level", log_level,
         ]  # fmt: skip
         if workers is not None:  # None: the app's default (one per core, 2 to 8)
-            args += ["--workers", str(workers)]
+            self.args += ["--workers", str(workers)]
         if not demo:
-            args.append("--no-demo")
+            self.args.append("--no-demo")
         inherited = {k: v for k, v in os.environ.items() if k != "MAPWISE_REQUIRE_AUTH"}
         defaults = {"MAPWISE_CANCEL_POLL_S": "0.05", "PYTHONUNBUFFERED": "1"}
+        self.env = inherited | defaults | (env or {})
+        self._last_output = ""
+        for attempt in range(1, PORT_ATTEMPTS + 1):
+            self._start()
+            try:
+                self._wait_ready()
+                return
+            except PortTakenError:
+                self.stop()
+                if attempt == PORT_ATTEMPTS:
+                    raise
+            except BaseException:
+                self.stop()
+                raise
+
+    def _start(self) -> None:
+        """Start the server on a new free port, its output to a new temporary log."""
+        self.port = free_port()
+        self.base = f"http://127.0.0.1:{self.port}"
+        self.ws_base = f"ws://127.0.0.1:{self.port}"
         self.log = tempfile.NamedTemporaryFile(  # noqa: SIM115 - closed in stop()
             "w+", prefix="mapwise-serve-", suffix=".log", delete=False
         )
         self.process = subprocess.Popen(
-            args, cwd=ROOT, env=inherited | defaults | (env or {}), stdout=self.log,
+            [*self.args, "--port", str(self.port)], cwd=ROOT, env=self.env, stdout=self.log,
             stderr=subprocess.STDOUT, start_new_session=True,
         )  # fmt: skip
-        self._last_output = ""
         self.http = httpx.Client(base_url=self.base, timeout=30)
-        try:
-            self._wait_ready()
-        except BaseException:
-            self.stop()
-            raise
 
     @property
     def url(self) -> str:
@@ -108,17 +142,35 @@ class Server:
         return httpx.Client(base_url=self.base, timeout=timeout)
 
     def _wait_ready(self, timeout: float = 90.0) -> None:
+        """Until ``/api/health`` answers from this server's own socket; raises
+        :class:`PortTakenError` if another process took the port first."""
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             if self.process.poll() is not None:
-                raise RuntimeError(f"server exited with {self.process.returncode}: {self.output()}")
+                output = self.output()
+                if "address already in use" in output.lower():
+                    raise PortTakenError(f"port {self.port} was taken: {output}")
+                raise RuntimeError(f"server exited with {self.process.returncode}: {output}")
             try:
-                if self.http.get("/api/health").status_code == 200:
+                # A health answer counts only once this server listens on the port: until it
+                # binds, another process that took the port may be the one answering.
+                if self.http.get("/api/health").status_code == 200 and self._listening():
                     return
             except httpx.TransportError:
                 pass
             time.sleep(0.1)
         raise RuntimeError(f"server not ready after {timeout} s: {self.output()}")
+
+    def _listening(self) -> bool:
+        """Whether the server process itself listens on ``self.port``."""
+        try:
+            connections = psutil.Process(self.process.pid).net_connections("tcp")
+        except psutil.NoSuchProcess:
+            return False
+        return any(
+            c.status == psutil.CONN_LISTEN and c.laddr and c.laddr.port == self.port
+            for c in connections
+        )
 
     def output(self) -> str:
         """The tail of the server's log (kept after :meth:`stop`)."""

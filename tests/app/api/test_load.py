@@ -9,6 +9,8 @@ import pytest
 from scripts.load import run_load
 from tests.support.server import Server
 
+pytestmark = pytest.mark.serial  # bounds p99 latency and frame delay
+
 
 @pytest.mark.soak
 def test_concurrent_users_get_no_errors_and_lose_no_run(backend: str, fresh_url) -> None:  # type: ignore[no-untyped-def]

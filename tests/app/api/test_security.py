@@ -281,6 +281,7 @@ def test_dns_rebinding_probes_are_all_refused(live: tuple[Server, int, int]) -> 
 
 
 @pytest.mark.slow
+@pytest.mark.serial  # a 1 s bound on the close
 def test_a_revoked_tokens_socket_is_closed_within_a_second(fresh_url) -> None:  # type: ignore[no-untyped-def]
     from websockets.asyncio.client import connect
 
@@ -321,6 +322,7 @@ def test_a_revoked_tokens_socket_is_closed_within_a_second(fresh_url) -> None:  
 
 
 @pytest.mark.slow
+@pytest.mark.serial  # bounds the event-loop lag
 def test_a_thousand_viewers_of_one_run_are_held_to_the_cap(fresh_url) -> None:  # type: ignore[no-untyped-def]
     """1000 viewers attempted on one streaming run, 50 handshakes at a time: exactly the
     cap (100) are served, the rest refused with 1013 and the reason; the API process grows

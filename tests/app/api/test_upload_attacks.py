@@ -23,7 +23,10 @@ import pytest
 
 from tests.support.server import Server
 
-pytestmark = pytest.mark.slow  # gigabyte streams against a real server
+pytestmark = [
+    pytest.mark.slow,  # gigabyte streams against a real server
+    pytest.mark.serial,  # bounds the event-loop lag
+]
 
 LIMIT_MB = 64
 

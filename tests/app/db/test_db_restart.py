@@ -29,6 +29,7 @@ def _restart_postgresql() -> None:
 
 @pytest.mark.slow
 @pytest.mark.postgres
+@pytest.mark.serial  # restarts the PostgreSQL server every other test uses
 def test_a_postgresql_restart_mid_run_is_survived(fresh_url, tmp_path: Any) -> None:  # type: ignore[no-untyped-def]
     srv = Server(fresh_url("postgresql"))
     statuses: list[int] = []
