@@ -11,6 +11,8 @@ Figures (docs/fidelity.md says what each is):
 - ``lpv/<scenario>/<part>``: LPV mean relative error, whole cycle and the papers' segment
   (WHTC 0–600 s for ETC part 1, FTP-75 0–505 s cold start); at ``nominal`` also with single
   sensor readings (``single``) and with the drawn model before identification (``drawn``);
+- ``lpv/<scenario>/<part>/literal`` (part ``lpv-literal``, levels none and nominal only): the
+  same with the paper's literal law, constant Γ = 200·I (``adaptation="constant"``);
 - ``ekf/<variant>``: RMSE of the estimated compressor flow W_c [g/s] on ``maf-1d-whtc``;
 - ``nox/<who>``: held-out prediction RMSE [ppm] of the measured NOx on ``nox-nedc`` over the
   last 30 % of the record with the map frozen after the first 70 % (kf, skf), the age-0 base
@@ -81,6 +83,26 @@ def lpv(level: str, seed: int) -> dict[str, float]:
     return out
 
 
+LPV_LITERAL = {"adaptation": "constant", "gamma": 200.0}
+"""LPV (24)–(25) as printed: the constant adaptation gain Γ = 200·I (docs/estimators.md)."""
+
+
+def lpv_literal(level: str, seed: int) -> dict[str, float]:
+    """The paper's literal LPV law beside the adaptive-gain one, at ``none`` and ``nominal``
+    only (elsewhere: nothing)."""
+    out: dict[str, float] = {}
+    if level not in ("none", "nominal"):
+        return out
+    for name, seconds in SEGMENTS_S.items():
+        sc = get_scenario(name)
+        data = sc.build(seed=seed, mismatch=level)  # type: ignore[arg-type]
+        config = sc.default_config("lpv", data=data) | LPV_LITERAL
+        with np.errstate(all="ignore"):
+            out[f"lpv/{name}/full/literal"] = lpv_mre(data, config)
+            out[f"lpv/{name}/segment/literal"] = lpv_mre(head(data, seconds), config)
+    return out
+
+
 def ekf(level: str, seed: int) -> dict[str, float]:
     sc = get_scenario("maf-1d-whtc")
     data = sc.build(seed=seed, mismatch=level)  # type: ignore[arg-type]
@@ -139,7 +161,7 @@ def torque(level: str, seed: int) -> dict[str, float]:
     return out
 
 
-PARTS = {"lpv": lpv, "ekf": ekf, "nox": nox, "torque": torque}
+PARTS = {"lpv": lpv, "lpv-literal": lpv_literal, "ekf": ekf, "nox": nox, "torque": torque}
 
 
 def parse_seeds(text: str) -> list[int]:
@@ -179,6 +201,8 @@ HEADLINE = (
     ("LPV MRE, whole FTP-75", "lpv/maf-ftp75/full", "%"),
     ("LPV MRE, WHTC 0–600 s, single readings", "lpv/maf-whtc/segment/single", "%"),
     ("LPV MRE, FTP-75 0–505 s, single readings", "lpv/maf-ftp75/segment/single", "%"),
+    ("LPV MRE, WHTC 0–600 s, paper's law Γ = 200 I", "lpv/maf-whtc/segment/literal", "%"),
+    ("LPV MRE, FTP-75 0–505 s, paper's law Γ = 200 I", "lpv/maf-ftp75/segment/literal", "%"),
     ("EKF W_c RMSE, Def [g/s]", "ekf/ekf-def", ""),
     ("EKF W_c RMSE, Aug [g/s]", "ekf/ekf-aug", ""),
     ("EKF W_c RMSE, Map [g/s]", "ekf/ekf-map", ""),

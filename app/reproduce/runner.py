@@ -28,6 +28,7 @@ MODULES = {
     "lpv": "app.reproduce.lpv",
     "ekf": "app.reproduce.ekf",
     "torque": "app.reproduce.torque",
+    "sensitivity": "app.reproduce.sensitivity",
 }
 """Section key → the module whose ``build(seeds)`` makes it, in report order."""
 SECTION_KEYS = tuple(MODULES)

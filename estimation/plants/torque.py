@@ -131,6 +131,12 @@ class TorqueTruth:
 
 
 # --- public API ---------------------------------------------------------------------------
+TRANSIENT_24S_S: float = 24.0
+TRANSIENT_24S_RPM: float = 2200.0
+"""The set-point step of ``transient_24s`` [s, rpm]: 1900 → 2200 rpm, the size of TQ §VI's
+other steps (the paper shows the transient, not its size)."""
+
+
 def simulate_si_torque(
     *,
     seed: int,
@@ -138,8 +144,13 @@ def simulate_si_torque(
     rate_hz: float = 1000.0,
     internal_rate_hz: float = 10_000.0,
     params: SiEngineParams | None = None,
+    transient_24s: bool = False,
 ) -> tuple[Signals, TorqueTruth]:
     """Simulate the SI engine of TQ §VI (speed profile 2200→2500→2200→1900 rpm).
+
+    ``transient_24s``: add a set-point step to :data:`TRANSIENT_24S_RPM` at 24 s. TQ's
+    estimation figures (§VI) show a transient at 24 s that its stated profile (steps at 0, 4,
+    12, 14 s) lacks; its size is not stated, so the step repeats the profile's 300 rpm.
 
     Returns measured :class:`Signals` — ``speed_rpm`` (+ noise w1), ``load_torque_nm``
     (+ noise w2), ``air_mass_flow_kg_s`` (ṁ_ai, + optional noise), and noise-free
@@ -150,6 +161,14 @@ def simulate_si_torque(
     p = SiEngineParams() if params is None else params
     validate_params(p)
     times, speeds = _schedule(p, "profile_times_s", "profile_speeds_rpm")
+    if transient_24s:
+        if times[-1] >= TRANSIENT_24S_S:
+            raise ConfigError(
+                f"transient_24s needs a profile that ends before {TRANSIENT_24S_S:g} s, got "
+                f"{p.profile_times_s}"
+            )
+        times = np.append(times, TRANSIENT_24S_S)
+        speeds = np.append(speeds, TRANSIENT_24S_RPM)
     if times[0] != 0.0:
         raise ConfigError(f"profile_times_s must start at 0, got {p.profile_times_s}")
     if np.any(speeds <= 0):

@@ -309,7 +309,8 @@ def test_adaptive_kernels_follow_the_continuous_law_under_zoh(name: str, kappa: 
     0.5–3.2 N·m and fails it. In the start-up, where Θ̂ moves by up to 10³ N·m per sample,
     within 0.2 % of max |τ̂| (measured ≤ 0.13 %: Radau IIA's O(h³) on SUBSTEPS steps)."""
     sig = log()
-    est = build(name, kappa=kappa)
+    fast = {"gamma": (100.0, 100.0)} if name == "adaptive-tv" else {}  # the 0.1 s start-up
+    est = build(name, kappa=kappa, **fast)
     exact = continuous(sig, est.config)[:, 2]  # type: ignore[arg-type]
     got = est.fit(sig).outputs["torque_nm"]
     old = start_of_step_adaptive(sig, est.config)["torque_nm"]  # type: ignore[arg-type]
@@ -420,7 +421,10 @@ def test_specs_errors_and_state_checks() -> None:
 
 
 # --- TQ §VI/§VII orderings (Tables III, IV, VI, VII) on our simulators ---------------------
-SEEDS = [0, 1, 2, 3, 4]
+# Claims are asserted on the held-out seeds 100–109 under mismatch="nominal" (the estimators'
+# J drawn ±10 % around the plant's; docs/fidelity.md): nothing was tuned on them. Where a
+# table's ordering does not hold, the test asserts the ordering that does, with the figures.
+SEEDS = list(range(100, 110))
 SCENARIOS = ["torque-si", "torque-rig"]
 ADAPTIVE = [f"{law}/{kappa}" for law in ("adaptive-const", "adaptive-tv") for kappa in (0.0, 0.1)]
 
@@ -430,7 +434,7 @@ def errors(scenario: str, seed: int) -> tuple[np.ndarray, dict[str, np.ndarray]]
     """Time [s] and τ̃ = τ_e − τ̂_e [N·m] of the estimators with the scenario's default
     configs, as ``mapwise run`` runs them; the adaptive laws with κ = 0 and 0.1."""
     sc = get_scenario(scenario)
-    data = sc.build(seed=seed)
+    data = sc.build(seed=seed, mismatch="nominal")
     truth = data.scored_series["torque_nm"]
     variants = {name: (name, {}) for name in ("uio", "smo", "dirty")}
     for key in ADAPTIVE:
@@ -438,7 +442,7 @@ def errors(scenario: str, seed: int) -> tuple[np.ndarray, dict[str, np.ndarray]]
         variants[key] = (law, {"kappa": float(kappa)})
     out = {}
     for key, (name, extra) in variants.items():
-        est = build(name, **(sc.default_config(name) | extra))
+        est = build(name, **(sc.default_config(name, data=data) | extra))
         out[key] = truth - est.fit(data.signals).outputs["torque_nm"]
     return data.signals.time, out
 
@@ -465,24 +469,13 @@ def seed_mean(scenario: str, key: str, metric: str) -> float:
     return float(np.mean([scores(scenario, seed)[key][metric] for seed in SEEDS]))
 
 
-NOT_BEST_ON_SI = (
-    "(54) κ = 0.1 is not the best adaptive variant: docs/estimators.md#dev-tq-not-best-on-si"
-)
-
-
 @pytest.mark.parametrize("seed", SEEDS)
-@pytest.mark.parametrize(
-    "scenario",
-    [
-        pytest.param("torque-si", marks=pytest.mark.xfail(strict=True, reason=NOT_BEST_ON_SI)),
-        "torque-rig",
-    ],
-)
-def test_time_varying_gain_with_kappa_is_best_adaptive_variant(scenario: str, seed: int) -> None:
+def test_time_varying_gain_with_kappa_is_best_adaptive_variant_on_the_rig(seed: int) -> None:
     """The issue's target from TQ Tables IV/VII: (54) with κ = 0.1 has the lowest ISE and SD.
-    (TQ Table VII itself ranks (50) with κ = 0.1 first on the rig; see the next test.) On
-    torque-rig, seeds 0–4: ISE 260–268, SD 3.19–3.24 against ≥ 1018 and ≥ 6.30 for the others."""
-    m = scores(scenario, seed)
+    (TQ Table VII itself ranks (50) with κ = 0.1 first on the rig; see below.) On torque-rig,
+    seeds 100–109, nominal: ISE 260–359, SD 3.20–3.75 against ≥ 1015 and ≥ 6.30 for the
+    others."""
+    m = scores("torque-rig", seed)
     best = "adaptive-tv/0.1"
     for key in ADAPTIVE:
         if key != best:
@@ -490,44 +483,42 @@ def test_time_varying_gain_with_kappa_is_best_adaptive_variant(scenario: str, se
             assert m[best]["sd"] < m[key]["sd"], (key, m)
 
 
-def band_ise(t: np.ndarray, e: np.ndarray) -> tuple[float, float]:
-    """ISE [N²·m²·s] over 5–30 s of τ̃ below and above 10 Hz (zero-phase 2nd-order
-    Butterworth split of the whole series, so the two parts sum to τ̃)."""
-    b, a = scipy.signal.butter(2, 10.0, fs=1.0 / float(t[1] - t[0]))
-    low = scipy.signal.filtfilt(b, a, e)
-    window = (t >= 5.0) & (t <= 30.0)
-    dt = float(t[1] - t[0])
-    return float(np.sum(low[window] ** 2) * dt), float(np.sum((e - low)[window] ** 2) * dt)
+@pytest.mark.parametrize("seed", SEEDS)
+def test_time_varying_gain_with_kappa_beats_the_constant_gain_on_si(seed: int) -> None:
+    """TQ Table IV on torque-si under the frozen Γ = 10·I of (54) (chosen on tuning seeds 0–4,
+    app/reproduce/sensitivity.py, docs/estimators.md#dev-tq-gamma-54): (54) with κ = 0.1 has
+    lower ISE and SD than (50) with κ = 0 and κ = 0.1 on every held-out seed (nominal, seeds
+    100–109: ISE 107–120 against 119–127, SD 2.06–2.19 against 2.18–2.25)."""
+    m = scores("torque-si", seed)
+    for other in ("adaptive-const/0.0", "adaptive-const/0.1"):
+        for metric in ("ise", "sd"):
+            assert m["adaptive-tv/0.1"][metric] < m[other][metric], (other, metric, m)
+
+
+def test_time_varying_gain_with_kappa_is_best_on_si_on_average() -> None:
+    """TQ Table IV's ordering on torque-si, on the held-out seed means: (54) with κ = 0.1 has
+    the lowest seed-mean ISE and SD of the four variants (nominal, seeds 100–109: ISE 111.7
+    against 122.2, 123.2, 388; SD 2.11 against 2.21, 2.22, 3.66). Per seed it is lowest on 9
+    of 10; on seed 108 (54) with κ = 0 is marginally lower (docs/estimators.md#dev-tq-gamma-54)."""
+    for metric in ("ise", "sd"):
+        means = {key: seed_mean("torque-si", key, metric) for key in ADAPTIVE}
+        assert min(means, key=means.__getitem__) == "adaptive-tv/0.1", (metric, means)
+    best = [
+        seed
+        for seed in SEEDS
+        if min(ADAPTIVE, key=lambda key: scores("torque-si", seed)[key]["ise"]) == "adaptive-tv/0.1"
+    ]
+    assert len(best) >= 9, best
 
 
 @pytest.mark.parametrize("seed", SEEDS)
-def test_kappa_trades_slow_tracking_for_fast_noise_on_si(seed: int) -> None:
-    """Why (54) κ = 0.1 is not best on torque-si (docs/estimators.md#dev-tq-not-best-on-si):
-    it does what TQ §VI says W2 is for and follows the slow torque best of the four variants,
-    but has the largest error above 10 Hz, where the 5–30 s budget lies. Seeds 0–4, τ̃ ISE
-    below / above 10 Hz: (54) κ = 0.1 14.9–17.0 / 132–140; (50) κ = 0.1 24.6–26.4 / 93–96;
-    (54) κ = 0 37.9–65.5 / 70–95; (50) κ = 0 57.6–59.9 / 58.9–59.3 (the firing ripple alone
-    gives 57.1 on seed 0)."""
-    t, err = errors("torque-si", seed)
-    bands = {key: band_ise(t, err[key]) for key in ADAPTIVE}
-    best = "adaptive-tv/0.1"
-    for key in ADAPTIVE:
-        if key != best:
-            assert bands[best][0] < bands[key][0], (key, bands)
-            assert bands[best][1] > bands[key][1], (key, bands)
-
-
-@pytest.mark.xfail(
-    strict=True,
-    reason="TQ Table VII ranking not reproduced: docs/estimators.md#dev-tq-rig-ranking",
-)
-@pytest.mark.parametrize("seed", SEEDS)
-def test_constant_gain_with_kappa_is_best_on_the_rig(seed: int) -> None:
+def test_constant_gain_with_kappa_is_not_first_on_the_rig(seed: int) -> None:
+    """TQ Table VII ranks (50) with κ = 0.1 first on the rig; here (54) with κ = 0.1 beats it
+    on ISE and SD on every held-out seed (docs/estimators.md#dev-tq-rig-ranking; nominal,
+    seeds 100–109: ISE 1201–1607 against 260–359)."""
     m = scores("torque-rig", seed)
-    for key in ADAPTIVE:
-        if key != "adaptive-const/0.1":
-            assert m["adaptive-const/0.1"]["ise"] < m[key]["ise"], (key, m)
-            assert m["adaptive-const/0.1"]["sd"] < m[key]["sd"], (key, m)
+    for metric in ("ise", "sd"):
+        assert m["adaptive-tv/0.1"][metric] < m["adaptive-const/0.1"][metric], (metric, m)
 
 
 @pytest.mark.parametrize("seed", SEEDS)
@@ -541,19 +532,17 @@ def test_constant_gain_with_kappa_is_best_on_the_rig(seed: int) -> None:
 )
 def test_kappa_reduces_the_peak_error(law: str, scenario: str, seed: int) -> None:
     """TQ §VI: W2 "reduces the peak errors at the transient points" (Tables IV, VII: MAE
-    19.2 → 14.8 and 19.7 → 12.7 in simulation, 15.4 → 9.4 and 17.3 → 9.7 on the rig). Seeds
-    0–4: (50) on torque-si 20.2–20.9 → 14.2–16.0, on torque-rig 83.3–84.0 → 48.2–48.9; (54)
-    on torque-rig 65.3–66.0 → 34.0–35.2. (54) on torque-si: next test."""
+    19.2 → 14.8 and 19.7 → 12.7 in simulation, 15.4 → 9.4 and 17.3 → 9.7 on the rig). Nominal,
+    seeds 100–109: (50) on torque-si 19.7–21.0 → 14.1–16.7, on torque-rig 83.6–84.3 →
+    47.6–50.1; (54) on torque-rig 64.8–66.4 → 33.1–35.9. (54) on torque-si: below."""
     m = scores(scenario, seed)
     assert m[f"{law}/0.1"]["mae"] < m[f"{law}/0.0"]["mae"], m
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="κ = 0.1 raises the MAE of (54) on torque-si: docs/estimators.md#dev-tq-kappa-mae-si",
-)
 def test_kappa_reduces_the_peak_error_of_the_time_varying_law_on_si_on_average() -> None:
-    """TQ §VI's claim for (54) in simulation, on the seed-mean MAE (seeds 0–4)."""
+    """TQ §VI: κ = 0.1 lowers the MAE of (54) in simulation (Table IV 19.65 → 12.74). Under
+    the frozen Γ = 10·I it lowers the seed-mean MAE on torque-si (nominal, seeds 100–109:
+    61.4 → 36.2 N·m; per seed 17–117 → 14–58; docs/estimators.md#dev-tq-gamma-54)."""
     assert seed_mean("torque-si", "adaptive-tv/0.1", "mae") < seed_mean(
         "torque-si", "adaptive-tv/0.0", "mae"
     )
@@ -562,41 +551,39 @@ def test_kappa_reduces_the_peak_error_of_the_time_varying_law_on_si_on_average()
 @pytest.mark.parametrize("seed", SEEDS)
 @pytest.mark.parametrize("law", ["adaptive-const", "adaptive-tv"])
 def test_kappa_reduces_ise_and_sd_on_the_rig(law: str, seed: int) -> None:
-    """TQ Table VII: ISE and SD fall when κ goes from 0 to 0.1, for both laws. Seeds 0–4:
-    (50) ISE 4230–4268 → 1328–1345, SD 13.01–13.06 → 7.29–7.33; (54) ISE 1019–1042 →
-    260–268, SD 6.31–6.37 → 3.19–3.24."""
+    """TQ Table VII: ISE and SD fall when κ goes from 0 to 0.1, for both laws. Nominal, seeds
+    100–109: (50) ISE 3924–4734 → 1201–1607, SD 12.5–13.8 → 6.93–8.01; (54) ISE 1015–1147 →
+    260–359, SD 6.30–6.68 → 3.20–3.75."""
     m = scores("torque-rig", seed)
     for metric in ("ise", "sd"):
         assert m[f"{law}/0.1"][metric] < m[f"{law}/0.0"][metric], (metric, m)
 
 
-W2_ON_SI = {
-    "adaptive-const": "no κ effect on (50) on torque-si: docs/estimators.md#dev-tq-kappa-50-si",
-    "adaptive-tv": "κ = 0.1 hurts (54) on torque-si: docs/estimators.md#dev-tq-kappa-54-si",
-}
-
-
-@pytest.mark.parametrize(
-    "law",
-    [
-        pytest.param(law, marks=pytest.mark.xfail(strict=True, reason=reason))
-        for law, reason in W2_ON_SI.items()
-    ],
-)
-def test_kappa_reduces_ise_and_sd_on_si_on_average(law: str) -> None:
-    """TQ Table IV's κ effect in simulation, on the seed-means (seeds 0–4): the per-seed
-    outcome is mixed for both laws (reasons)."""
+def test_kappa_reduces_the_seed_mean_ise_and_sd_of_the_time_varying_law_on_si() -> None:
+    """TQ Table IV: κ = 0.1 lowers ISE and SD of (54) (1.72e5 → 7.49e4, 2.76 → 1.82). Under
+    the frozen Γ = 10·I it does on the torque-si seed means (nominal, seeds 100–109: ISE 388
+    → 111.7, SD 3.66 → 2.11; without κ the law drifts on most seeds, ISE 105–983)."""
     for metric in ("ise", "sd"):
-        kappa_01 = seed_mean("torque-si", f"{law}/0.1", metric)
-        assert kappa_01 < seed_mean("torque-si", f"{law}/0.0", metric), metric
+        with_kappa = seed_mean("torque-si", "adaptive-tv/0.1", metric)
+        assert with_kappa < seed_mean("torque-si", "adaptive-tv/0.0", metric), metric
+
+
+def test_kappa_leaves_the_seed_mean_ise_and_sd_of_the_constant_gain_on_si_unchanged() -> None:
+    """TQ Table IV's κ effect on (50) in simulation (κ = 0.1 lowers ISE and SD) is not there
+    on torque-si: the seed means with and without κ = 0.1 are within 3 % of each other
+    (nominal, seeds 100–109: ISE 123.2 against 122.2; docs/estimators.md#dev-tq-kappa-50-si)."""
+    for metric in ("ise", "sd"):
+        with_kappa = seed_mean("torque-si", "adaptive-const/0.1", metric)
+        without = seed_mean("torque-si", "adaptive-const/0.0", metric)
+        assert abs(with_kappa / without - 1.0) < 0.03, (metric, with_kappa, without)
 
 
 def test_paper_diagonal_gain_destabilises_the_time_varying_law() -> None:
     """Why AdaptiveTvConfig's Γ is scalar: TQ's Γ = diag(0.1, 100) (stated for (50)) breaks
     Theorem 4's Lyapunov argument, and on torque-si (54) with κ = 0.1 diverges with it."""
     sc = get_scenario("torque-si")
-    data = sc.build(seed=0)
-    cfg = sc.default_config("adaptive-tv") | {"kappa": 0.1}
+    data = sc.build(seed=100, mismatch="nominal")
+    cfg = sc.default_config("adaptive-tv", data=data) | {"kappa": 0.1}
     assert AdaptiveTvConfig(**cfg).gamma[0] == AdaptiveTvConfig(**cfg).gamma[1]
     with np.errstate(all="ignore"):
         paper = build("adaptive-tv", **cfg, gamma=(0.1, 100.0)).fit(data.signals).outputs
