@@ -161,6 +161,16 @@ export function metricLabel(key) {
     samples_per_s: "Samples/s",
     estimate_s: "Compute time",
     run_s: "Compute time",
+    "holdout:rmse": "Held-out RMSE",
+    "holdout:mae": "Held-out mean |e|",
+    "holdout:max_abs_error": "Held-out max |e|",
+    "holdout:base_rmse": "Base map held-out RMSE",
+    "holdout:base_mae": "Base map held-out mean |e|",
+    "holdout:base_max_abs_error": "Base map held-out max |e|",
+    "holdout:samples": "Held-out samples",
+    "nis:mean": "Mean NIS",
+    "nis:in_band": "NIS in 95 % band",
+    "nis:innovation_mean": "Innovation mean",
   };
   return known[key] ?? key.replaceAll("_", " ").replace(/^\w/, (c) => c.toUpperCase());
 }

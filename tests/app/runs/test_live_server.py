@@ -92,7 +92,12 @@ def test_stream_full_then_rate_limited_deltas_for_many_viewers(server: Server) -
     for v in [*viewers, stalled]:
         v.start()
     server.wait_run(run_id, ("running",))
-    time.sleep(1.5)
+    # The late joiner comes once the run has samples behind it (a wall-clock sleep was not
+    # enough on a loaded machine: the worker may not have finished its first chunk by then).
+    deadline = time.monotonic() + 60
+    while server.get(f"/api/runs/{run_id}")["progress"] <= 0 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(0.5)
     late = Viewer(url)
     late.start()
     for v in [*viewers, stalled, late]:

@@ -211,15 +211,23 @@ function metricCards(v) {
   const unitOf = (k) => {
     if (isTorque && (k === "mae" || k === "sd")) return torqueUnit;
     if (k === "coverage") return "";
-    if (/rmse|max_abs/.test(k)) return isTorque ? torqueUnit : outputUnit;
+    if (/rmse|max_abs|^holdout:.*mae$|^nis:innovation_mean$/.test(k)) {
+      return isTorque ? torqueUnit : outputUnit;
+    }
     return "";
   };
   const rank = (k) => METRIC_ORDER.indexOf(k) + 1 || 99;
   const cards = [];
   for (const k of Object.keys(s.metrics).sort((a, b) => rank(a) - rank(b))) {
     const value = s.metrics[k];
-    if (typeof value !== "number" || OWN_CARDS.has(k)) continue;
-    cards.push(metric(k, k === "coverage" ? `${fmt(value * 100, 3)} %` : fmt(value), unitOf(k)));
+    if (typeof value !== "number" || OWN_CARDS.has(k) || k.startsWith("nis:mean_band")) continue;
+    const percent = k === "coverage" || k === "nis:in_band";
+    // NIS (docs/tuning.md): its mean is read against the 95 % band of its χ² distribution.
+    const band =
+      k === "nis:mean" && "nis:mean_band_low" in s.metrics
+        ? `95 % band ${fmt(s.metrics["nis:mean_band_low"])}–${fmt(s.metrics["nis:mean_band_high"])}`
+        : "";
+    cards.push(metric(k, percent ? `${fmt(value * 100, 3)} %` : fmt(value), unitOf(k), band));
   }
   const rejected = rejectedTotal(s.run.rejected ?? {});
   const samples = s.sample || Math.round((s.progress ?? 0) * s.nSamples);
