@@ -73,13 +73,22 @@ npm run --silent format:check
 NO_MKDOCS_2_WARNING=1 .venv/bin/mkdocs build --strict --quiet -d "$(mktemp -d)"
 
 if [ "$fast" -eq 1 ]; then
-    status=0
-    pytest_on "$FAST_LANE" || status=$?
-    if [ "$status" -eq 5 ]; then  # the arguments picked only tests outside the fast lane
+    # The same two phases as the whole suite, on two workers (MAPWISE_FAST_JOBS).
+    parallel=0
+    pytest_on "($FAST_LANE) and not serial" -n "${MAPWISE_FAST_JOBS:-2}" --dist loadfile ||
+        parallel=$?
+    serial=0
+    pytest_on "($FAST_LANE) and serial" || serial=$?
+    if [ "$parallel" -eq 5 ] && [ "$serial" -eq 5 ]; then  # only tests outside the lane
         echo "test.sh --fast: no fast-lane test matches; run them with scripts/test.sh" >&2
         exit 0
     fi
-    exit "$status"
+    for status in "$parallel" "$serial"; do
+        if [ "$status" -ne 0 ] && [ "$status" -ne 5 ]; then
+            exit "$status"
+        fi
+    done
+    exit 0
 fi
 
 # The whole suite: a skipped test fails the run (tests/conftest.py). pytest's exit code 5
