@@ -171,13 +171,19 @@ def parse_seeds(text: str) -> list[int]:
     return [int(s) for s in text.split(",")]
 
 
-def table(paths: list[Path]) -> str:
+def _figures(paths: list[Path]) -> dict[str, dict[str, list[float]]]:
+    """Every figure of the JSON-lines files, per key and mismatch level, over the seeds."""
     rows: dict[str, dict[str, list[float]]] = {}
     for path in paths:
         for line in path.read_text().splitlines():
             rec = json.loads(line)
             for key, value in rec["figures"].items():
                 rows.setdefault(key, {}).setdefault(rec["level"], []).append(value)
+    return rows
+
+
+def table(paths: list[Path]) -> str:
+    rows = _figures(paths)
     levels = ("none", "nominal", "severe")
     lines = ["| figure | " + " | ".join(levels) + " |", "|---|" + "---|" * len(levels)]
     for key in sorted(rows):
@@ -227,12 +233,7 @@ HEADLINE = (
 
 def headline(paths: list[Path]) -> str:
     """The README table: seed means (range) of the headline figures per level."""
-    rows: dict[str, dict[str, list[float]]] = {}
-    for path in paths:
-        for line in path.read_text().splitlines():
-            rec = json.loads(line)
-            for key, value in rec["figures"].items():
-                rows.setdefault(key, {}).setdefault(rec["level"], []).append(value)
+    rows = _figures(paths)
     levels = ("none", "nominal", "severe")
     out = ["| figure (seeds 100–109) | " + " | ".join(levels) + " |", "|---|---|---|---|"]
     for label, pattern, unit in HEADLINE:
