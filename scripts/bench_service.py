@@ -13,7 +13,12 @@ Against a real ``mapwise serve`` process:
 A run that does not finish in ``--timeout`` seconds, or a viewer or poller that fails, ends
 the benchmark with an error instead of a figure.
 
-    .venv/bin/python scripts/bench_service.py [--database-url URL] [--rows N] [--json]
+    .venv/bin/python scripts/bench_service.py [--database-url URL] [--rows N] [--viewers N]
+        [--repeat 5] [--deflate] [--json]
+
+Each figure is the median and the worst of ``--repeat`` rounds on one server (the machines
+are shared and noisy); ``--deflate`` turns on permessage-deflate (``MAPWISE_WS_DEFLATE``) to
+show what compressing once per viewer costs the live fan-out.
 """
 
 from __future__ import annotations
@@ -134,104 +139,147 @@ def latency_figures(phase: str, latencies: list[float]) -> dict[str, float]:
     }
 
 
+# Figures where a larger value is better; for every other figure the worst is the largest.
+HIGHER_IS_BETTER = ("rows_per_s", "frames_per_s", "api_requests")
+
+
+def warm_up(client: httpx.Client, server: Server, timeout: float) -> None:
+    """Warm the run workers (imports, compiled kernels) as a server in use would be."""
+    small = "time,speed_rpm,fuel_mg_per_stroke,nox_ppm\n" + "".join(
+        f"{k * 0.01},{1000 + k},{10 + k % 50},{100 + k % 7}\n" for k in range(500)
+    )
+    tiny = client.post("/api/datasets", files={"file": ("w.csv", small.encode())}).json()
+    for _ in range(2):
+        warm = client.post("/api/runs", json=drive_run_body(tiny["id"])).json()
+        server.wait_run(warm["id"], ("succeeded", "failed"), timeout)
+
+
+def bulk_round(
+    client: httpx.Client, server: Server, log_path: Path, args: argparse.Namespace
+) -> tuple[dict[str, Any], int]:
+    """Phase 1: upload the log, run the SKF at full speed, wait until it is persisted."""
+    bulk_latencies: list[float] = []
+    stop = threading.Event()
+    paths = ["/api/runs?limit=5", "/api/datasets"]
+    pollers = [Worker(poller, server.base, paths, stop, bulk_latencies) for _ in range(4)]
+    for th in pollers:
+        th.start()
+    t0 = time.perf_counter()
+    with log_path.open("rb") as f:
+        response = client.post("/api/datasets", files={"file": ("drive.csv", f)})
+    response.raise_for_status()
+    dataset = response.json()
+    t1 = time.perf_counter()
+    run = client.post("/api/runs", json=drive_run_body(dataset["id"])).json()
+    done = server.wait_run(run["id"], ("succeeded", "failed"), args.timeout)
+    t2 = time.perf_counter()
+    stop.set()
+    for th in pollers:
+        th.result()
+    if done["status"] != "succeeded":
+        raise RuntimeError(f"the bulk run failed: {done['error']}")
+    figures = {
+        "upload_s": round(t1 - t0, 2),
+        "run_and_persist_s": round(t2 - t1, 2),
+        "estimator_s": round(done["metrics"]["run_s"], 3),
+        "total_s": round(t2 - t0, 2),
+        "rows_per_s": round(args.rows / (t2 - t0)),
+        **latency_figures("bulk", bulk_latencies),
+    }
+    return figures, int(dataset["id"])
+
+
+def live_round(
+    client: httpx.Client, server: Server, dataset_id: int, args: argparse.Namespace
+) -> dict[str, Any]:
+    """Phase 2: a paced run watched by ``args.viewers`` viewers while 4 clients poll."""
+    duration_s = args.rows / 100.0
+    pace = duration_s / (args.live_seconds * 1.5)
+    live = client.post("/api/runs", json=drive_run_body(dataset_id, pace=pace)).json()
+    server.wait_run(live["id"], ("running",), args.timeout)
+    counts = [0] * args.viewers
+    ws_url = f"{server.ws_base}/api/runs/{live['id']}/stream"
+    threads = [Worker(viewer, ws_url, args.live_seconds, counts, i) for i in range(args.viewers)]
+    latencies: list[float] = []
+    stop = threading.Event()
+    paths = [f"/api/runs/{live['id']}", "/api/datasets"]
+    pollers = [Worker(poller, server.base, paths, stop, latencies) for _ in range(4)]
+    for th in threads + pollers:
+        th.start()
+    for th in threads:
+        th.result()
+    stop.set()
+    for th in pollers:
+        th.result()
+    client.post(f"/api/runs/{live['id']}/cancel")
+    rates = [c / args.live_seconds for c in counts]
+    return {
+        "frames_per_s_per_viewer_min": round(min(rates), 1),
+        "frames_per_s_per_viewer_mean": round(statistics.mean(rates), 1),
+        "frames_per_s_total": round(sum(rates), 1),
+        **latency_figures("live", latencies),
+    }
+
+
+def summarise(rounds: list[dict[str, Any]]) -> dict[str, Any]:
+    """Median and worst of each figure over the rounds (worst: the slowest time, the
+    lowest rate)."""
+    out: dict[str, Any] = {}
+    for key in rounds[0]:
+        values = [r[key] for r in rounds]
+        worst = min(values) if key.startswith(HIGHER_IS_BETTER) else max(values)
+        out[key] = {"median": round(statistics.median(values), 3), "worst": worst}
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--database-url", help="default: a fresh SQLite file")
     parser.add_argument("--rows", type=int, default=360_000)
     parser.add_argument("--viewers", type=int, default=20)
     parser.add_argument("--live-seconds", type=float, default=20.0)
+    parser.add_argument("--repeat", type=int, default=5, help="rounds; median and worst")
+    parser.add_argument("--deflate", action="store_true", help="MAPWISE_WS_DEFLATE=true")
     parser.add_argument("--timeout", type=float, default=600.0, help="per run, seconds")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
+    if args.repeat < 1:
+        parser.error("--repeat must be at least 1")
     work = Path(tempfile.mkdtemp(prefix="mapwise-bench-"))
     url = args.database_url or f"sqlite:///{work / 'bench.db'}"
     log_path = work / "log.csv"
     make_log(log_path, args.rows)
-    server = Server(url, workers=None)
-    base = server.base
+    env = {"MAPWISE_WS_DEFLATE": "true" if args.deflate else "false"}
+    server = Server(url, workers=None, env=env)
     result: dict[str, Any] = {
         "rows": args.rows,
         "channels": 12,
         "csv_mb": round(log_path.stat().st_size / 2**20, 1),
         "database": url.split(":")[0],
         "cpus": os.cpu_count(),
+        "viewers": args.viewers,
+        "ws_deflate": args.deflate,
+        "rounds": args.repeat,
     }
+    rounds: list[dict[str, Any]] = []
     try:
-        with httpx.Client(base_url=base, timeout=600) as client:
-            # warm the run workers (imports, compiled kernels) as a server in use would be
-            small = "time,speed_rpm,fuel_mg_per_stroke,nox_ppm\n" + "".join(
-                f"{k * 0.01},{1000 + k},{10 + k % 50},{100 + k % 7}\n" for k in range(500)
-            )
-            tiny = client.post("/api/datasets", files={"file": ("w.csv", small.encode())}).json()
-            for _ in range(2):
-                warm = client.post("/api/runs", json=drive_run_body(tiny["id"])).json()
-                server.wait_run(warm["id"], ("succeeded", "failed"), args.timeout)
-            bulk_latencies: list[float] = []
-            stop = threading.Event()
-            paths = ["/api/runs?limit=5", "/api/datasets"]
-            pollers = [Worker(poller, base, paths, stop, bulk_latencies) for _ in range(4)]
-            for th in pollers:
-                th.start()
-            t0 = time.perf_counter()
-            with log_path.open("rb") as f:
-                response = client.post("/api/datasets", files={"file": ("drive.csv", f)})
-            response.raise_for_status()
-            dataset = response.json()
-            t1 = time.perf_counter()
-            run = client.post("/api/runs", json=drive_run_body(dataset["id"])).json()
-            done = server.wait_run(run["id"], ("succeeded", "failed"), args.timeout)
-            t2 = time.perf_counter()
-            stop.set()
-            for th in pollers:
-                th.result()
-            if done["status"] != "succeeded":
-                raise RuntimeError(f"the bulk run failed: {done['error']}")
-            result |= {
-                "upload_s": round(t1 - t0, 2),
-                "run_and_persist_s": round(t2 - t1, 2),
-                "estimator_s": round(done["metrics"]["run_s"], 3),
-                "total_s": round(t2 - t0, 2),
-                "rows_per_s": round(args.rows / (t2 - t0)),
-                "versions": done["n_versions"],
-                "server_peak_rss_mb": peak_rss_mb(server.process.pid),
-                **latency_figures("bulk", bulk_latencies),
-            }
-
-            duration_s = args.rows / 100.0
-            pace = duration_s / (args.live_seconds * 1.5)
-            live = client.post("/api/runs", json=drive_run_body(dataset["id"], pace=pace)).json()
-            server.wait_run(live["id"], ("running",), args.timeout)
-            counts = [0] * args.viewers
-            ws_url = f"{server.ws_base}/api/runs/{live['id']}/stream"
-            threads = [
-                Worker(viewer, ws_url, args.live_seconds, counts, i) for i in range(args.viewers)
-            ]
-            latencies: list[float] = []
-            stop = threading.Event()
-            paths = [f"/api/runs/{live['id']}", "/api/datasets"]
-            pollers = [Worker(poller, base, paths, stop, latencies) for _ in range(4)]
-            for th in threads + pollers:
-                th.start()
-            for th in threads:
-                th.result()
-            stop.set()
-            for th in pollers:
-                th.result()
-            client.post(f"/api/runs/{live['id']}/cancel")
-            rates = [c / args.live_seconds for c in counts]
-            result |= {
-                "viewers": args.viewers,
-                "frames_per_s_per_viewer_min": round(min(rates), 1),
-                "frames_per_s_per_viewer_mean": round(statistics.mean(rates), 1),
-                "frames_per_s_total": round(sum(rates), 1),
-                **latency_figures("live", latencies),
-            }
+        with httpx.Client(base_url=server.base, timeout=600) as client:
+            warm_up(client, server, args.timeout)
+            for _ in range(args.repeat):
+                bulk, dataset_id = bulk_round(client, server, log_path, args)
+                rounds.append(bulk | live_round(client, server, dataset_id, args))
+                client.delete(f"/api/datasets/{dataset_id}", params={"force": "true"})
+        result["server_peak_rss_mb"] = peak_rss_mb(server.process.pid)
     finally:
         server.stop()
+    result |= summarise(rounds)
     if args.json:
         print(json.dumps(result))
-    else:
-        for key, value in result.items():
+        return
+    for key, value in result.items():
+        if isinstance(value, dict):
+            print(f"{key:<32} median {value['median']:<12} worst {value['worst']}")
+        else:
             print(f"{key:<32} {value}")
 
 

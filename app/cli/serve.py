@@ -168,6 +168,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         port=settings.port,
         log_level=args.log_level,
         ws="websockets-sansio",
+        ws_per_message_deflate=settings.ws_deflate,
     )
     return 0
 

@@ -25,8 +25,14 @@ from playwright.sync_api import (
     Browser,
     ConsoleMessage,
     Page,
+    expect,
     sync_playwright,
 )
+
+# Playwright's assertions wait 5 s by default; the suite shares two cores with servers and
+# other browsers, and a cold view can take longer than that there. Waiting longer changes
+# nothing when the page is right, and a wrong page still fails (after 20 s).
+expect.set_options(timeout=20_000)
 
 
 @pytest.fixture(scope="module")
