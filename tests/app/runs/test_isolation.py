@@ -78,7 +78,7 @@ def test_twenty_worker_kills_lose_only_the_killed_runs_attempts(
         dataset = upload_ok(server.http, text)
         body = run_body(dataset["id"], pace=2, version_every={"samples": 200})  # 10 s a run
         ids = [int(start_run(server.http, body)["id"]) for _ in range(RUNS)]
-        deadline = time.monotonic() + 90
+        deadline = time.monotonic() + 300  # a bound against a hang, not a speed check
         kills = 0
         while kills < KILLS:
             assert time.monotonic() < deadline, server.output()
