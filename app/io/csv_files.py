@@ -5,6 +5,12 @@ header as ``name [unit]`` or in an optional second row whose non-empty cells are
 non-numeric; lines starting with ``#`` are comments. With ``;`` or tab as delimiter a decimal
 comma (``1,5``) is recognised. Every problem is reported with its file line and column name.
 
+The header, units row and delimiter are read here in Python (a few lines); the body by
+:mod:`app.io.csv_arrow` with ``pyarrow.csv`` in blocks, which falls back to the Python
+rules of this module (:func:`_parse_body`) only for a block pyarrow refuses or that holds
+a value mapwise refuses — so values and messages are those of the Python rules alone
+(``tests/app/io/test_csv_equivalence.py`` holds the two to that).
+
 ``mapwise adapt`` reads only the columns it needs (:func:`read_csv` with ``columns``); the
 upload path (:mod:`app.io.ingest`) calls :func:`parse_sparse_csv`: every column must be
 numeric, and an empty cell is no sample of that channel (a sparse multi-rate export,
@@ -16,7 +22,7 @@ from __future__ import annotations
 import csv
 import re
 from collections import Counter
-from collections.abc import Mapping, Sequence, Set
+from collections.abc import Callable, Mapping, Sequence, Set
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -77,7 +83,8 @@ class _Table:
     time_column: str | None
     delimiter: str
     decimal: str
-    lines: list[int]
+    rows: int
+    line_of: Callable[[int], int]  # the file line of a data row, for messages
 
 
 def read_csv(
@@ -93,15 +100,11 @@ def read_csv(
     """
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8-sig")
+        data = path.read_bytes()  # parsed as such when pure ASCII: no decoding, no copy
     except FileNotFoundError:
         raise LogFormatError(f"{path}: no such file", field="file") from None
-    except UnicodeDecodeError as exc:
-        raise LogFormatError(
-            f"{path}: not a UTF-8 text file ({exc.reason})", field="file"
-        ) from None
     try:
-        return parse_csv(text, columns=columns, time_column=time_column)
+        return parse_csv(data, columns=columns, time_column=time_column)
     except LogFormatError as exc:
         if exc.field == "file" and exc.line is None:
             raise LogFormatError(f"{path}: {exc}", field="file") from None
@@ -109,7 +112,7 @@ def read_csv(
 
 
 def parse_csv(
-    text: str,
+    text: str | bytes,
     *,
     columns: Sequence[str] | None = None,
     time_column: str | None = None,
@@ -124,7 +127,8 @@ def parse_csv(
     ``columns``: the channels wanted (each must be numeric); ``None`` keeps every numeric
     column, or — with ``strict`` — requires every column to be numeric. ``units`` overrides
     units by column name (an unknown name is an error, field ``units.<name>``). ``decimal``
-    is ``"."``, ``","`` or ``None`` (detected). Raises :class:`LogFormatError`.
+    is ``"."``, ``","`` or ``None`` (detected). ``bytes`` are UTF-8 (a BOM is skipped);
+    pure ASCII is parsed without decoding. Raises :class:`LogFormatError`.
     """
     table = _read_table(
         text,
@@ -141,13 +145,13 @@ def parse_csv(
         parsed = {name: v for name, v in table.values.items() if v is not None}
         signals = Signals(table.time, parsed, table.units)
     except SignalError as exc:
-        message, line = _with_line(str(exc), table.lines)
+        message, line = _with_line(str(exc), table.rows, table.line_of)
         raise LogFormatError(message, field=table.time_column or "time", line=line) from None
     return CsvLog(signals, table.time_column, table.delimiter, table.decimal)
 
 
 def parse_sparse_csv(
-    text: str,
+    text: str | bytes,
     *,
     time_column: str | None = None,
     units: Mapping[str, str] | None = None,
@@ -159,7 +163,8 @@ def parse_sparse_csv(
     rows of its own samples. Every column must be numeric (:func:`parse_csv` with
     ``strict``); an empty cell is no sample of that channel (NaN in
     :attr:`SparseCsv.columns`), except in the time column. A row with no sample of any
-    channel is refused, naming its line, as is every explicit ``nan``/``inf``."""
+    channel is refused, naming its line, as is every explicit ``nan``/``inf``. ``bytes``
+    as in :func:`parse_csv`."""
     table = _read_table(
         text,
         columns=None,
@@ -174,7 +179,7 @@ def parse_sparse_csv(
     try:
         Signals(table.time, {})
     except SignalError as exc:
-        message, line = _with_line(str(exc), table.lines)
+        message, line = _with_line(str(exc), table.rows, table.line_of)
         raise LogFormatError(message, field=table.time_column or "time", line=line) from None
     values = {name: v for name, v in table.values.items() if v is not None}
     if values and table.time.size:
@@ -183,12 +188,12 @@ def parse_sparse_csv(
             sampled |= np.isfinite(v)
         if not np.all(sampled):
             k = int(np.argmin(sampled))
-            first = next(iter(values))
+            first, line = next(iter(values)), table.line_of(k)
             raise LogFormatError(
-                f"line {table.lines[k]}, column {first!r}: empty value, and the row holds no "
+                f"line {line}, column {first!r}: empty value, and the row holds no "
                 "sample of any channel",
                 field=first,
-                line=table.lines[k],
+                line=line,
             )
     return SparseCsv(
         table.time,
@@ -201,7 +206,7 @@ def parse_sparse_csv(
 
 
 def _read_table(
-    text: str,
+    text: str | bytes,
     *,
     columns: Sequence[str] | None,
     time_column: str | None,
@@ -214,7 +219,13 @@ def _read_table(
 ) -> _Table:
     """The header, units and numeric columns of CSV ``text`` (the rules of
     :func:`parse_csv`); with ``empty_is_missing`` an empty data cell is NaN."""
-    lines = _content_lines(text)
+    if isinstance(text, bytes) and not text.isascii():
+        try:
+            text = text.decode("utf-8-sig")
+        except UnicodeDecodeError as exc:
+            raise LogFormatError(f"not a UTF-8 text file ({exc.reason})", field="file") from None
+    head = _head_lines(text, 22)  # header, units row and the 20 rows sniffed
+    lines = [(n, ln) for n, ln, _ in head]
     if not lines:
         raise LogFormatError("empty file, expected a header row", field="file")
     header_line, header_text = lines[0]
@@ -246,9 +257,8 @@ def _read_table(
             )
         header_units = [u.strip() or h for u, h in zip(rows[1], header_units, strict=True)]
         start = 2
-    body = [ln for _, ln in lines[start:]]
-    lines_of_body = numbers[start:]
-    del lines  # the body and its line numbers are all that is needed from here on
+    body_start = head[start - 1][2]
+    sample = lines[start : start + 20]
     unit_of = dict(zip(names, header_units, strict=True))
     for name, unit in (units or {}).items():
         if name not in unit_of:
@@ -258,8 +268,8 @@ def _read_table(
             )
         unit_of[name] = str(unit)
     if decimal is None:
-        head = _columns(body[:20], lines_of_body[:20], delimiter, len(names))
-        decimal = sniff_decimal([list(r) for r in zip(*head, strict=True)], delimiter)
+        cells = _columns([ln for _, ln in sample], [n for n, _ in sample], delimiter, len(names))
+        decimal = sniff_decimal([list(r) for r in zip(*cells, strict=True)], delimiter)
     if time_column is None:
         time_column = next((c for c in TIME_COLUMNS if c in names), None)
     elif time_column not in names:
@@ -281,10 +291,21 @@ def _read_table(
         if name == time_column or wanted is None or name in wanted
     }
     allowed_empty = {n for n in must if n != time_column} if empty_is_missing else set()
-    values = _parse_body(body, lines_of_body, delimiter, names, must, decimal, allowed_empty)
+    from app.io.csv_arrow import read_body  # pyarrow: loaded with the first log read
+
+    body = read_body(
+        text,
+        body_start,
+        delimiter=delimiter,
+        names=names,
+        must=must,
+        decimal=decimal,
+        allowed_empty=allowed_empty,
+    )
+    values = body.values
     stamps = values.pop(time_column) if time_column is not None else None
-    time = stamps if stamps is not None else np.arange(len(lines_of_body), dtype=np.float64)
-    return _Table(time, values, unit_of, time_column, delimiter, decimal, lines_of_body)
+    time = stamps if stamps is not None else np.arange(body.rows, dtype=np.float64)
+    return _Table(time, values, unit_of, time_column, delimiter, decimal, body.rows, body.line_of)
 
 
 def split_lines(text: str) -> list[str]:
@@ -293,13 +314,37 @@ def split_lines(text: str) -> list[str]:
     return text.replace("\r\n", "\n").replace("\r", "\n").split("\n")
 
 
-def _content_lines(text: str) -> list[tuple[int, str]]:
-    """Non-blank, non-comment lines with their 1-based line numbers."""
+def _content_lines(text: str, first: int = 1) -> list[tuple[int, str]]:
+    """Non-blank, non-comment lines with their line numbers (``text`` starting at line
+    ``first``)."""
     return [
         (n, ln)
-        for n, ln in enumerate(split_lines(text), start=1)
+        for n, ln in enumerate(split_lines(text), start=first)
         if ln.strip() and not ln.lstrip().startswith("#")
     ]
+
+
+_LINE_BREAK = re.compile(r"\r\n|\r|\n")
+_LINE_BREAK_BYTES = re.compile(rb"\r\n|\r|\n")
+
+
+def _head_lines(text: str | bytes, count: int) -> list[tuple[int, str, int]]:
+    """The first ``count`` content lines (as :func:`_content_lines`): line number, text and
+    where the next line starts, without splitting the rest of ``text`` (a str, or bytes of
+    pure ASCII)."""
+    out: list[tuple[int, str, int]] = []
+    pos, number = 0, 0
+    breaks = _LINE_BREAK if isinstance(text, str) else _LINE_BREAK_BYTES
+    while pos < len(text) and len(out) < count:
+        match = breaks.search(text, pos)  # type: ignore[arg-type]
+        end, after = (match.start(), match.end()) if match else (len(text), len(text))
+        number += 1
+        part = text[pos:end]
+        line = part if isinstance(part, str) else part.decode("ascii")
+        if line.strip() and not line.lstrip().startswith("#"):
+            out.append((number, line, after))
+        pos = after
+    return out
 
 
 def sniff_delimiter(sample_lines: list[str]) -> str:
@@ -444,10 +489,11 @@ def _parse_body(
     decimal: str,
     allowed_empty: Set[str] = frozenset(),
 ) -> dict[str, np.ndarray | None]:
-    """Floats of the columns in ``must`` (name → strict), converted :data:`CHUNK_ROWS` rows at
-    a time so that the cells held as Python strings stay a small part of the file; a
-    non-strict column that is not numeric throughout is ``None``. An empty cell of a column
-    in ``allowed_empty`` is NaN."""
+    """The Python rules for a block of the body (:mod:`app.io.csv_arrow` calls this only for
+    a block pyarrow refused or that holds a refused value): floats of the columns in
+    ``must`` (name → strict), converted :data:`CHUNK_ROWS` rows at a time so that the cells
+    held as Python strings stay a small part of the block; a non-strict column that is not
+    numeric throughout is ``None``. An empty cell of a column in ``allowed_empty`` is NaN."""
     parts: dict[str, list[np.ndarray] | None] = {name: [] for name in must}
     for lo in range(0, max(len(body), 1), CHUNK_ROWS):
         chunk_lines = lines[lo : lo + CHUNK_ROWS]
@@ -556,11 +602,11 @@ def _looks_numeric(text: str) -> bool:
     return True
 
 
-def _with_line(message: str, lines: list[int]) -> tuple[str, int | None]:
+def _with_line(message: str, rows: int, line_of: Callable[[int], int]) -> tuple[str, int | None]:
     """Rewrite ``at sample k`` in a Signals error as the file line."""
     match = re.search(r"at sample (\d+)", message)
-    if match and int(match[1]) < len(lines):
-        line = lines[int(match[1])]
+    if match and int(match[1]) < rows:
+        line = line_of(int(match[1]))
         return message.replace(match[0], f"at line {line}"), line
     return message, None
 
