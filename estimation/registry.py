@@ -190,10 +190,12 @@ def family(
     """The spec maker of a family of estimators built as ``estimator(name, config)``.
 
     ``make(name, title, description, config_model, state_class, output_units,
-    produces_map=…, cost=…)`` gives one member's spec, with the family's kind and paper
-    (and cost, unless the member declares its own).
+    produces_map=…, cost=…, paper=…)`` gives one member's spec, with the family's kind, and
+    its paper and cost unless the member declares its own (a baseline in a family built on
+    one paper credits its own source, not the family's).
     """
     family_cost = cost
+    family_paper = paper
 
     def make(
         name: str,
@@ -205,6 +207,7 @@ def family(
         *,
         produces_map: bool = produces_map,
         cost: Cost = family_cost,
+        paper: str = family_paper,
     ) -> EstimatorSpec:
         def factory(config: BaseModel) -> Estimator:
             if not isinstance(config, config_base):

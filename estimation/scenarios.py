@@ -12,6 +12,11 @@ estimators' model constants are drawn around the plant's; ``"none"`` is the perf
 setting (the estimators' constants are the plant's, the truth a table on their grid);
 ``"severe"`` doubles the ranges. ``ScenarioData.metadata`` records the level, the logging
 (sensor averaging) and every drawn constant beside the plant's.
+
+``noise_scale`` (default 1) multiplies every sensor noise σ of the plant's logging, the
+estimators' own σ settings staying as configured: the robustness study's unexpected noise
+level (0: noise-free logs). ``transient_24s`` (``torque-si`` only) adds TQ §VI's set-point step
+at 24 s (:func:`estimation.plants.torque.simulate_si_torque`).
 """
 
 from __future__ import annotations
@@ -46,7 +51,9 @@ class ScenarioData:
     the nodes and ``true_along`` its value at each scoring point, which the map metrics use
     (:func:`estimation.metrics.map_metrics`). ``metadata`` holds ``mismatch``, ``truth``
     (``"table"`` or ``"function"``), ``averaging`` (sensor readings averaged per logged
-    sample, ``None`` where the scenario has no such sensors) and ``parameters`` (every
+    sample, ``None`` where the scenario has no such sensors), ``noise_scale`` (the factor on
+    every sensor noise σ of the log; the noise σ under ``parameters`` are the stated
+    logging's, which the estimators' are drawn around) and ``parameters`` (every
     estimator-side constant beside the plant's, :class:`estimation.mismatch.MismatchDraw`);
     ``estimator_params`` maps those names to the estimator-side values.
     """
@@ -91,6 +98,8 @@ class Scenario:
     """``configs(estimator, drawn=None)``: the config, ``None`` where it does not apply."""
     logging: str = "single readings per logged sample"
     averaging: int | None = None
+    options: tuple[str, ...] = ()
+    """Scenario-specific build options this entry accepts (``"transient_24s"``)."""
 
     def build(
         self,
@@ -99,9 +108,14 @@ class Scenario:
         duration_s: float | None = None,
         mismatch: MismatchLevel = "nominal",
         averaging: int | None = None,
+        noise_scale: float = 1.0,
+        transient_24s: bool = False,
     ) -> ScenarioData:
         """One realisation. ``averaging``: sensor readings averaged per logged sample
-        (air-path scenarios only; default: the scenario's stated logging, ``self.logging``)."""
+        (air-path scenarios only; default: the scenario's stated logging, ``self.logging``).
+        ``noise_scale``: factor on every sensor noise σ of the log, in [0, 100] (the
+        estimators' σ settings are not scaled). ``transient_24s``: ``torque-si`` only, TQ
+        §VI's transient at 24 s."""
         if duration_s is not None and not 0 < duration_s <= self.duration_s:
             raise ConfigError(
                 f"duration must be in (0, {self.duration_s:g}] s for {self.name!r}, "
@@ -118,7 +132,24 @@ class Scenario:
                 raise ConfigError(f"averaging must be an integer ≥ 1, got {averaging!r}")
             if not 1 <= averaging <= 1000:
                 raise ConfigError(f"averaging must be in [1, 1000] readings, got {averaging}")
-        return self.builder(Build(int(seed), duration_s, level, averaging))
+        if isinstance(noise_scale, bool) or not isinstance(noise_scale, int | float | np.number):
+            raise ConfigError(f"noise_scale must be a number in [0, 100], got {noise_scale!r}")
+        if not (np.isfinite(noise_scale) and 0.0 <= noise_scale <= 100.0):
+            raise ConfigError(f"noise_scale must be in [0, 100], got {noise_scale!r}")
+        if transient_24s and "transient_24s" not in self.options:
+            raise ConfigError(
+                f"transient_24s applies to the torque-si scenario (TQ §VI), not {self.name!r}"
+            )
+        return self.builder(
+            Build(
+                int(seed),
+                duration_s,
+                level,
+                averaging,
+                float(noise_scale),
+                bool(transient_24s),
+            )
+        )
 
     def default_config(self, estimator: str, data: ScenarioData | None = None) -> dict[str, Any]:
         """The starting config of ``estimator`` on this scenario (papers' settings). With
@@ -143,18 +174,22 @@ class Scenario:
             "channels": [{"name": n, "unit": u} for n, u in self.channels],
             "suggested_estimators": list(self.suggested),
             "logging": self.logging,
+            "options": list(self.options),
         }
 
 
 @dataclass(frozen=True, slots=True)
 class Build:
-    """What a builder is asked for: seed, duration (``None``: whole record), mismatch level
-    and sensor averaging (``None``: the scenario's stated logging)."""
+    """What a builder is asked for: seed, duration (``None``: whole record), mismatch level,
+    sensor averaging (``None``: the scenario's stated logging), the factor on every sensor
+    noise σ of the log (``noise_scale``) and, for ``torque-si``, TQ's 24 s transient."""
 
     seed: int
     duration_s: float | None
     mismatch: MismatchLevel
     averaging: int | None
+    noise_scale: float = 1.0
+    transient_24s: bool = False
 
     def draw(self, scenario: str) -> MismatchDraw:
         return MismatchDraw(scenario, self.seed, self.mismatch)
@@ -169,6 +204,7 @@ def _metadata(build: Build, draw: MismatchDraw | None, averaging: int | None) ->
         "mismatch": build.mismatch,
         "truth": "function" if build.off_grid else "table",
         "averaging": averaging,
+        "noise_scale": build.noise_scale,
         "parameters": [] if draw is None else list(draw.records),
     }
 
@@ -221,7 +257,11 @@ def _skf_sim(number: int) -> Scenario:
         # The SKF paper's synthetic problems: the truth y = 1 is constant (any grid represents
         # it) and the filters have no model constants, only the paper's σ; every level is the
         # paper's problem (docs/fidelity.md).
-        signals, truth = skf_sim(number, seed=b.seed)  # type: ignore[arg-type]
+        signals, truth = skf_sim(
+            number,  # type: ignore[arg-type]
+            seed=b.seed,
+            noise_scale=b.noise_scale,
+        )
         return ScenarioData(
             scenario=f"skf-sim{number}",
             seed=b.seed,
@@ -273,14 +313,15 @@ def _nox(name: str, cycle: str, description: str, duration_s: float) -> Scenario
         drive = make_sdmp(seed=b.seed) if cycle == "sdmp" else load_cycle(cycle)
         points = operating_points(drive, rate_hz=rate_hz)
         stop = points.time_s.size if b.duration_s is None else int(b.duration_s * rate_hz) + 1
+        plant = DEFAULT_NOX_PARAMS
         signals, truth = simulate_nox(
             points.time_s[:stop],
             points.speed_rpm[:stop],
             points.fuel_mg_per_cycle[:stop],
             seed=b.seed,
+            params=dataclasses.replace(plant, noise_std_ppm=plant.noise_std_ppm * b.noise_scale),
             base_function=NOX_BASE if b.off_grid else None,
         )
-        plant = DEFAULT_NOX_PARAMS
         draw = b.draw(name)
         draw.time_constant_pole("sensor_lag", plant.lag, 1.0 / rate_hz)
         draw.samples("sensor_delay_samples", delay_samples(plant.delay_s, 1.0 / rate_hz))
@@ -459,7 +500,8 @@ def _maf(name: str, cycle: str, kind: str, description: str, duration_s: float) 
         averaging = b.averaging
         if averaging is None:
             averaging = _AIRPATH_READINGS if b.off_grid or kind == "2d" else 1
-        noise = NoiseSpec(averaged_readings=averaging)
+        stated = NoiseSpec(averaged_readings=averaging)
+        noise = stated.scaled(b.noise_scale)
         signals, truth = simulate_airpath(
             points.time_s[:stop],
             points.fuel_mg_per_cycle[:stop],
@@ -474,12 +516,14 @@ def _maf(name: str, cycle: str, kind: str, description: str, duration_s: float) 
         for param, cls, unit in _AIRPATH_DRAWN:
             draw.relative(param, getattr(truth.params, param), cls, unit)  # type: ignore[arg-type]
         for param, plant_name, unit in _AIRPATH_SIGMAS:
-            logged = getattr(noise, plant_name) * noise.logged_scale()
+            # around the stated logging's σ: the estimators are not told of noise_scale
+            logged = getattr(stated, plant_name) * stated.logged_scale()
             draw.relative(param, logged, "noise_sigma", unit)
         metadata = _metadata(b, draw, averaging)
         estimator_params = draw.values()
         if b.off_grid:
             drawn_model = {p: estimator_params[p] for p, _, _ in _AIRPATH_DRAWN}
+            # the identification log is logged like the scenario's, noise_scale included
             model, metadata["identification"] = _identified_model(
                 cycle, b.seed, noise, drawn_model, rate_hz
             )
@@ -564,18 +608,42 @@ def _torque(name: str, description: str, channels: tuple[tuple[str, str], ...]) 
 
     def build(b: Build) -> ScenarioData:
         from estimation.plants.torque import simulate_si_torque, simulate_torque_rig
+        from estimation.plants.torque_params import DieselRigParams, SiEngineParams
 
-        simulate = simulate_si_torque if name == "torque-si" else simulate_torque_rig
-        signals, truth = simulate(seed=b.seed, duration_s=b.duration_s, rate_hz=rate_hz)
+        params = SiEngineParams() if name == "torque-si" else DieselRigParams()
+        params = dataclasses.replace(
+            params,
+            speed_noise_std_rpm=params.speed_noise_std_rpm * b.noise_scale,
+            load_noise_std_nm=params.load_noise_std_nm * b.noise_scale,
+            air_noise_std_kg_s=params.air_noise_std_kg_s * b.noise_scale,
+        )
+        if name == "torque-si":
+            signals, truth = simulate_si_torque(
+                seed=b.seed,
+                duration_s=b.duration_s,
+                rate_hz=rate_hz,
+                params=params,  # type: ignore[arg-type]
+                transient_24s=b.transient_24s,
+            )
+        else:
+            signals, truth = simulate_torque_rig(
+                seed=b.seed,
+                duration_s=b.duration_s,
+                rate_hz=rate_hz,
+                params=params,  # type: ignore[arg-type]
+            )
         draw = b.draw(name)
         draw.relative("J_nm_s_per_rpm", truth.J_nm_s_per_rpm, "inertia", "N·m·s/rpm")
+        metadata = _metadata(b, draw, None)
+        if name == "torque-si":
+            metadata["transient_24s"] = b.transient_24s
         return ScenarioData(
             scenario=name,
             seed=b.seed,
             signals=signals,
             truth=truth.to_dict(),
             scored_series={"torque_nm": truth.torque_nm},
-            metadata=_metadata(b, draw, None),
+            metadata=metadata,
             estimator_params=draw.values(),
         )
 
@@ -600,6 +668,7 @@ def _torque(name: str, description: str, channels: tuple[tuple[str, str], ...]) 
         suggested=names(EstimatorKind.TORQUE),
         builder=build,
         configs=configs,
+        options=("transient_24s",) if name == "torque-si" else (),
     )
 
 

@@ -2,13 +2,15 @@
 
 With ``--json`` it prints (a contract)::
 
-    {"scenario", "estimator", "seed", "mismatch", "logging", "estimator_model", "config",
-     "metrics": {...}, "timing": {"estimate_s"},
+    {"scenario", "estimator", "seed", "mismatch", "logging", "noise_scale",
+     "estimator_model", "config", "metrics": {...}, "timing": {"estimate_s"},
      "map": <the map document of app.io.map_json>}        # "map" for map estimators only
 
 ``mismatch`` is the level the scenario was built at (``--mismatch``, default ``nominal``;
-docs/fidelity.md), ``logging`` the sensor averaging of the log, ``estimator_model`` every
-estimator-side model constant beside the plant's.
+docs/fidelity.md), ``logging`` the sensor averaging of the log, ``noise_scale`` the factor on
+every sensor noise σ of the log (``--noise-scale``, default 1; the estimator's σ settings are
+not scaled), ``estimator_model`` every estimator-side model constant beside the plant's.
+``--transient-24s`` adds TQ §VI's set-point step at 24 s to ``torque-si``.
 
 Map metrics: ``rmse`` and ``max_abs_error`` against the true map on visited cells,
 ``mean_relative_error`` (LPV §4 as defined in docs/algorithms.md §3), ``coverage``; plus
@@ -71,7 +73,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def add_mismatch_arguments(p: argparse.ArgumentParser) -> None:
-    """``--mismatch`` and ``--averaging`` (docs/fidelity.md)."""
+    """``--mismatch``, ``--averaging`` (docs/fidelity.md), ``--noise-scale`` and
+    ``--transient-24s`` (:meth:`estimation.scenarios.Scenario.build`)."""
     p.add_argument(
         "--mismatch",
         choices=LEVELS,
@@ -85,6 +88,19 @@ def add_mismatch_arguments(p: argparse.ArgumentParser) -> None:
         help="air-path scenarios: sensor readings averaged per logged sample (default: the "
         "scenario's logging; 1 = single readings)",
     )
+    p.add_argument(
+        "--noise-scale",
+        type=float,
+        default=1.0,
+        metavar="S",
+        help="multiply every sensor noise σ of the simulated log by S in [0, 100] (default 1; "
+        "0 = noise-free); the estimator's σ settings stay as configured",
+    )
+    p.add_argument(
+        "--transient-24s",
+        action="store_true",
+        help="torque-si: add TQ §VI's set-point step at 24 s (1900 → 2200 rpm)",
+    )
 
 
 def run_command(args: argparse.Namespace) -> int:
@@ -97,13 +113,17 @@ def run_command(args: argparse.Namespace) -> int:
         duration_s=args.duration,
         mismatch=args.mismatch,
         averaging=args.averaging,
+        noise_scale=args.noise_scale,
+        transient_24s=args.transient_24s,
     )
     if args.json:
         print(json.dumps(result))
         return 0
+    noise = "" if result["noise_scale"] == 1.0 else f", noise × {result['noise_scale']:g}"
     print(
         f"{result['estimator']} on {result['scenario']} (seed {result['seed']}, mismatch "
-        f"{result['mismatch']}, {result['logging']}), {result['timing']['estimate_s']:.3f} s"
+        f"{result['mismatch']}, {result['logging']}{noise}), "
+        f"{result['timing']['estimate_s']:.3f} s"
     )
     for key, value in result["metrics"].items():
         print(f"  {key:<22} {'n/a' if value is None else f'{value:.6g}'}")
@@ -145,6 +165,8 @@ def run_scenario(
     duration_s: float | None = None,
     mismatch: str | None = None,
     averaging: int | None = None,
+    noise_scale: float = 1.0,
+    transient_24s: bool = False,
 ) -> dict[str, Any]:
     """Build the scenario, run the estimator over it, and score the result."""
     return execute_scenario(
@@ -155,6 +177,8 @@ def run_scenario(
         duration_s=duration_s,
         mismatch=mismatch,
         averaging=averaging,
+        noise_scale=noise_scale,
+        transient_24s=transient_24s,
     ).result
 
 
@@ -184,15 +208,18 @@ def execute_scenario(
     every: int | None = None,
     mismatch: str | None = None,
     averaging: int | None = None,
+    noise_scale: float = 1.0,
+    transient_24s: bool = False,
 ) -> ScenarioRun:
     """:func:`run_scenario` keeping the data and the final snapshot.
 
     ``data``: a realisation of the scenario already built (same name and seed), reused
     instead of simulating again. ``every``: run in chunks of that many samples and keep the
     snapshot after each (resuming equals the uninterrupted run, so the score is the same).
-    ``mismatch`` (default :data:`MISMATCH`'s value, ``"nominal"``) and ``averaging``: see
-    :meth:`estimation.scenarios.Scenario.build`. The estimator starts from the realisation's
-    config (its drawn model constants), then ``overrides``.
+    ``mismatch`` (default :data:`MISMATCH`'s value, ``"nominal"``), ``averaging``,
+    ``noise_scale`` and ``transient_24s``: see :meth:`estimation.scenarios.Scenario.build`.
+    The estimator starts from the realisation's config (its drawn model constants), then
+    ``overrides``.
     """
     scenario = get_scenario(scenario_name)
     spec = get_spec(estimator_name)
@@ -203,6 +230,8 @@ def execute_scenario(
             duration_s=duration_s,
             mismatch=level,  # type: ignore[arg-type]
             averaging=averaging,
+            noise_scale=noise_scale,
+            transient_24s=transient_24s,
         )
     elif data.scenario != scenario.name or data.seed != seed:
         raise ConfigError(
@@ -219,6 +248,7 @@ def execute_scenario(
         "seed": seed,
         "mismatch": data.mismatch,
         "logging": _logging(scenario.logging, data.metadata.get("averaging")),
+        "noise_scale": float(data.metadata.get("noise_scale", 1.0)),
         "estimator_model": data.metadata.get("parameters", []),
         "config": estimator.config.model_dump(mode="json"),
         "metrics": {},

@@ -47,6 +47,8 @@ def run_command(args: argparse.Namespace) -> int:
         duration_s=args.duration,
         mismatch=args.mismatch,
         averaging=args.averaging,
+        noise_scale=args.noise_scale,
+        transient_24s=args.transient_24s,
     )
     written = []
     try:

@@ -14,6 +14,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from html import escape
 from pathlib import Path
+from typing import Any
 
 import plotly.graph_objects as go
 
@@ -49,12 +50,14 @@ Block = Text | Table | Figure
 
 @dataclass(slots=True)
 class Section:
-    """One part of the report: ``verdict`` is its one-line agreement summary."""
+    """One part of the report: ``verdict`` is its one-line agreement summary; ``data`` its
+    figures as JSON-able values for ``report.json`` (empty: the section has none there)."""
 
     key: str
     title: str
     verdict: str
     blocks: list[Block] = field(default_factory=list)
+    data: dict[str, Any] = field(default_factory=dict)
 
 
 # --- number formatting ---------------------------------------------------------------------
@@ -86,6 +89,11 @@ def to_markdown(title: str, preamble: Sequence[Block], sections: Sequence[Sectio
         for block in section.blocks:
             lines += _md_block(block)
     return "\n".join(lines).rstrip() + "\n"
+
+
+def table_markdown(table: Table) -> str:
+    """One table as Markdown (caption, header, rows), e.g. for a terminal."""
+    return "\n".join(_md_block(table)).rstrip() + "\n"
 
 
 def _md_block(block: Block) -> list[str]:

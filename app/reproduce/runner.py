@@ -1,13 +1,25 @@
-"""``mapwise reproduce``: run every section live and write ``report.md`` and ``report.html``.
+"""``mapwise reproduce``: run every section live and write ``report.md``, ``report.html``
+and ``report.json``.
 
 Nothing of ours is stored: each section runs the registered estimators on the catalog's
 scenarios (:func:`app.cli.run.execute_scenario`) for the chosen seeds and puts the
 results beside the papers' constants (:mod:`app.reproduce.paper_values`).
+
+``report.json`` (a contract: extend, never break)::
+
+    {"title", "command", "seeds", "seconds",
+     "sections": [{"key", "title", "verdict", "seconds", "data"}]}
+
+``data`` is the section's figures where it has them as data (the robustness study: its
+cells and one record ``{"level", "noise_scale", "seed", "figures"}`` per cell and seed), else
+``{}``.
 """
 
 from __future__ import annotations
 
 import importlib
+import json
+import math
 import time
 import traceback
 from collections.abc import Callable, Sequence
@@ -29,9 +41,15 @@ MODULES = {
     "ekf": "app.reproduce.ekf",
     "torque": "app.reproduce.torque",
     "sensitivity": "app.reproduce.sensitivity",
+    "robustness": "app.reproduce.robustness",
 }
 """Section key → the module whose ``build(seeds)`` makes it, in report order."""
 SECTION_KEYS = tuple(MODULES)
+OPT_IN = ("robustness",)
+"""Sections run only when asked for (``--robustness`` or ``--only``): the robustness study
+runs every headline figure in five cells: 66 s of CPU for one seed (9 min wall on a loaded
+2-core machine), against seconds for most sections."""
+DEFAULT_KEYS = tuple(k for k in SECTION_KEYS if k not in OPT_IN)
 
 
 def _builder(key: str) -> Callable[[Sequence[int]], Section]:
@@ -46,6 +64,7 @@ class Reproduced:
     html: Path
     sections: tuple[tuple[Section, float], ...]
     seconds: float
+    json: Path | None = None
 
     @property
     def failed(self) -> list[str]:
@@ -98,11 +117,11 @@ def reproduce(
     out: Path = DEFAULT_OUT,
     *,
     seeds: Sequence[int] = DEFAULT_SEEDS,
-    only: Sequence[str] = SECTION_KEYS,
+    only: Sequence[str] = DEFAULT_KEYS,
     progress: Callable[[str], None] | None = None,
 ) -> Reproduced:
-    """Run the chosen sections for ``seeds`` and write ``out/report.md`` and
-    ``out/report.html``."""
+    """Run the chosen sections for ``seeds`` and write ``out/report.md``,
+    ``out/report.html`` and ``out/report.json``."""
     if not seeds:
         raise ConfigError("--seeds: give at least one seed")
     try:
@@ -120,13 +139,58 @@ def reproduce(
     seconds = time.perf_counter() - t0
     preamble = _preamble(seeds, only, done, seconds)
     sections = [s for s, _ in done]
-    markdown, html = out / "report.md", out / "report.html"
+    markdown, html, doc = out / "report.md", out / "report.html", out / "report.json"
     try:
         markdown.write_text(to_markdown(TITLE, preamble, sections), encoding="utf-8")
         write_html(html, TITLE, preamble, sections)
+        doc.write_text(
+            json.dumps(_document(seeds, only, done, seconds), allow_nan=False) + "\n",
+            encoding="utf-8",
+        )
     except OSError as exc:
         raise ConfigError(f"--out {out}: {exc.strerror or exc}") from None
-    return Reproduced(markdown, html, tuple(done), seconds)
+    return Reproduced(markdown, html, tuple(done), seconds, doc)
+
+
+def _command(seeds: Sequence[int], only: Sequence[str]) -> str:
+    command = f"mapwise reproduce --seeds {','.join(map(str, seeds))}"
+    if tuple(only) == DEFAULT_KEYS + OPT_IN:
+        return command + " --robustness"
+    if tuple(only) != DEFAULT_KEYS:
+        command += f" --only {','.join(only)}"
+    return command
+
+
+def _document(
+    seeds: Sequence[int], only: Sequence[str], done: Sequence[tuple[Section, float]], seconds: float
+) -> dict[str, object]:
+    return {
+        "title": TITLE,
+        "command": _command(seeds, only),
+        "seeds": list(seeds),
+        "seconds": seconds,
+        "sections": [
+            {
+                "key": s.key,
+                "title": s.title,
+                "verdict": s.verdict,
+                "seconds": t,
+                "data": _finite(s.data),
+            }
+            for s, t in done
+        ],
+    }
+
+
+def _finite(value: object) -> object:
+    """``value`` with every non-finite float as ``None`` (JSON has no inf or NaN)."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v) for v in value]
+    return value
 
 
 def _preamble(
@@ -135,9 +199,7 @@ def _preamble(
     done: Sequence[tuple[Section, float]],
     seconds: float,
 ) -> list[Text | Table]:
-    command = f"mapwise reproduce --seeds {','.join(map(str, seeds))}"
-    if tuple(only) != SECTION_KEYS:
-        command += f" --only {','.join(only)}"
+    command = _command(seeds, only)
     return [
         Text(
             f"Generated by `{command}` in {seconds:.1f} s. Every number of ours is computed "

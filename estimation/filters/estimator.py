@@ -233,6 +233,11 @@ RLS = _spec(
     RlsConfig,
     LocalState,
     _UNITS,
+    # Not from the SKF paper: the textbook exponentially weighted RLS, restricted to the
+    # active cells as Peyton Jones & Muske do for look-up tables.
+    paper="Ljung & Söderström (1983), Theory and Practice of Recursive Identification, MIT "
+    "Press; Haykin (2002), Adaptive Filter Theory, 4th ed., Prentice Hall; active cells only "
+    "as in Peyton Jones & Muske (2009), ISA Transactions — exponentially weighted RLS baseline",
 )
 NLMS = _spec(
     "nlms",
@@ -243,5 +248,6 @@ NLMS = _spec(
     ThetaState,
     _UNITS,
     cost=GAIN_COST,
+    paper="Haykin (2002), Adaptive Filter Theory, 4th ed., Prentice Hall — normalised LMS baseline",
 )
 FILTER_SPECS = (KF, SKF, SSKF, RLS, NLMS)

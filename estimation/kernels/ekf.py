@@ -24,7 +24,9 @@ Pieces (all over whole arrays, no allocation inside the sample loop):
   noise is integrated along the same steps;
 * :func:`ekf_kernel` — the filter: predict, sequential scalar updates with a χ² innovation
   gate and a line search along the Kalman step (for the compressor-flow kink at
-  ``p_im = p_amb``), PSD-preserving covariance limiting of the parameter states.
+  ``p_im = p_amb``), covariance limiting of the parameter states: PSD-preserving
+  (:data:`LIMIT_PSD`, mapwise's default) or the EKF paper's literal diagonal cap
+  (:data:`LIMIT_DIAG`).
 """
 
 import math
@@ -35,6 +37,11 @@ import numpy as np
 from estimation.kernels import airpath_plant as apk
 from estimation.kernels.kalman import _cap_row_col
 from estimation.kernels.regressor import _locate
+
+# Covariance limiting of the parameter states (``limit`` of :func:`ekf_kernel`).
+LIMIT_NONE = 0
+LIMIT_PSD = 1  # P ← D P D, D = I except D_ii = √(P0_ii / P_ii): P_ii = P0_ii, P stays PSD
+LIMIT_DIAG = 2  # P_ii ← min(P_ii, P0_ii), off-diagonals untouched (EKF §3.1 as written)
 
 MODE_DEF = 0
 MODE_AUG = 1
@@ -461,7 +468,7 @@ def ekf_kernel(
     accept: np.ndarray,
     q_rate: np.ndarray,
     p0_diag: np.ndarray,
-    limit: bool,
+    limit: int,
     gate2: float,
     max_step_s: float,
     prm: np.ndarray,
@@ -483,9 +490,13 @@ def ekf_kernel(
 
     1. (``k > 0``) predict from ``k − 1``: :func:`propagate` with
        ``n_sub = ⌈Δt / max_step_s⌉``, ``P ← F P Fᵀ + blockdiag(Qd, diag(q_rate[3:]) Δt)``
-       with ``F = blockdiag(Φ, I)`` (parameters are random walks, EKF (4b)); with ``limit``, every
-       parameter variance ``P_ii > P0_ii`` is capped PSD-preservingly (EKF §3.1,
-       docs/algorithms.md §2.5);
+       with ``F = blockdiag(Φ, I)`` (parameters are random walks, EKF (4b)); then every
+       parameter variance ``P_ii > P0_ii`` is capped (EKF §3.1, docs/algorithms.md §2.5):
+       ``limit = LIMIT_PSD`` scales row and column ``i`` by ``√(P0_ii / P_ii)`` (``D P D``,
+       ``P`` stays PSD); ``LIMIT_DIAG`` is the paper's literal cap ``P_ii ← min(P_ii, P0_ii)``
+       with the off-diagonals left as they are, which can make ``P`` indefinite (the paper
+       caps the diagonal and says nothing of the off-diagonal terms; leaving them is the
+       literal reading); ``LIMIT_NONE`` caps nothing;
     2. the prior outputs ``ŷ_j`` (all four) go to ``yhat_out``;
     3. unless ``accept[k]`` is false, for each used output ``j`` in order: ``ŷ_j = h_j(x)``,
        ``H_j`` (:func:`measurement`), ``e = Y[k, j] − ŷ_j``, ``v = P H_jᵀ``,
@@ -550,10 +561,14 @@ def ekf_kernel(
                     P[c, i] = mean
             for i in range(N_X, m):
                 P[i, i] += q_rate[i] * dt
-            if limit:
+            if limit == LIMIT_PSD:
                 for i in range(N_X, m):
                     if P[i, i] > p0_diag[i]:
                         _cap_row_col(P, i, p0_diag[i])
+            elif limit == LIMIT_DIAG:
+                for i in range(N_X, m):
+                    if P[i, i] > p0_diag[i]:
+                        P[i, i] = p0_diag[i]
         for j in range(N_Y):
             yhat_out[o, j] = output_value(j, x, mode, g, U[k], mem, prm, alg)
         status = ACCEPTED

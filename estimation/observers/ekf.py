@@ -163,11 +163,14 @@ class EkfSettings:
     r_rel2: np.ndarray
     q_rate: np.ndarray
     p0_diag: np.ndarray
-    limit: bool
+    limit: int  # kern.LIMIT_NONE / LIMIT_PSD / LIMIT_DIAG
     gate2: float
     max_step_s: float
     theta0: float
     prm: np.ndarray
+
+
+_LIMITS = {"none": kern.LIMIT_NONE, "p0": kern.LIMIT_PSD, "diag": kern.LIMIT_DIAG}
 
 
 def resolve_settings(kind: str, config: EkfConfig) -> EkfSettings:
@@ -197,7 +200,7 @@ def resolve_settings(kind: str, config: EkfConfig) -> EkfSettings:
         r_rel2=r_rel2,
         q_rate=np.array(q),
         p0_diag=np.array(p0),
-        limit=config.limit == "p0",
+        limit=_LIMITS[config.limit],
         gate2=np.inf if config.gate_sigma is None else config.gate_sigma**2,
         max_step_s=config.max_step_s,
         theta0=theta0,

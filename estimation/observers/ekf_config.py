@@ -111,8 +111,12 @@ class EkfConfig(_Strict):
         description="Innovation gate: an output with e²/s > gate_sigma² is not used (χ², "
         "1 dof; null: no gate).",
     )
-    limit: Literal["none", "p0"] = Field(
-        "p0", description="Cap parameter variances at P0, PSD-preserving (EKF §3.1)."
+    limit: Literal["none", "p0", "diag"] = Field(
+        "p0",
+        description="Cap parameter variances at P0 (EKF §3.1): p0 = PSD-preserving, "
+        "P ← D·P·D with D_ii = √(P0_ii/P_ii) (mapwise); diag = the paper's literal "
+        "P_ii ← min(P_ii, P0_ii), off-diagonals untouched (P can become indefinite); "
+        "none = no cap.",
     )
 
     @field_validator("sigma_state", "sigma0_state")

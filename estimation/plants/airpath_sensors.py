@@ -178,6 +178,21 @@ class NoiseSpec:
     def off(cls) -> NoiseSpec:
         return cls(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 
+    def scaled(self, factor: float) -> NoiseSpec:
+        """Every σ multiplied by ``factor`` (≥ 0; the averaging unchanged): the logging's
+        noise at an unexpected level (``Scenario.build(noise_scale=…)``)."""
+        if not np.isfinite(factor) or factor < 0:
+            raise ConfigError(f"noise scale must be finite and ≥ 0, got {factor!r}")
+        return NoiseSpec(
+            maf_rel=self.maf_rel * factor,
+            p_im_pa=self.p_im_pa * factor,
+            p_em_pa=self.p_em_pa * factor,
+            omega_t_rel=self.omega_t_rel * factor,
+            speed_rpm=self.speed_rpm * factor,
+            fuel_mg=self.fuel_mg * factor,
+            averaged_readings=self.averaged_readings,
+        )
+
     def logged_scale(self) -> float:
         """Factor ``1/√N`` from a reading's σ to the logged sample's σ."""
         return 1.0 / float(np.sqrt(self.averaged_readings))

@@ -134,13 +134,17 @@ def sim2_u2_profile() -> np.ndarray:
     return 60.0 - np.abs(SIM2_U2_STEP * k - 60.0)
 
 
-def skf_sim(number: Literal[1, 2, 3], *, seed: int = 0) -> tuple[Signals, SkfSimTruth]:
+def skf_sim(
+    number: Literal[1, 2, 3], *, seed: int = 0, noise_scale: float = 1.0
+) -> tuple[Signals, SkfSimTruth]:
     """Data of simulation ``number`` of SKF §5 (see the module docstring).
 
     Parameters
     ----------
     number : 1 (random inputs, 1400 samples), 2 (u2 sweep, 200 samples) or 3 (2 + noise).
     seed : seed of ``np.random.default_rng`` (inputs of sim 1, noise of sim 3).
+    noise_scale : factor on the noise of sim 3 (``U(−0.2s, 0.2s)``), applied after the draw so
+        the same seed gives the same noise shape at every scale (0: noise-free).
 
     Returns
     -------
@@ -169,6 +173,7 @@ def skf_sim(number: Literal[1, 2, 3], *, seed: int = 0) -> tuple[Signals, SkfSim
     y_true = np.ones(u1.size)  # = ψ(u_k)ᵀ vec(T_r), written exactly as the paper's y_k = 1
     if number == 3:
         noise = rng.uniform(-SIM3_NOISE_AMPLITUDE, SIM3_NOISE_AMPLITUDE, y_true.size)
+        noise *= float(noise_scale)
     else:
         noise = np.zeros_like(y_true)
     y = y_true + noise

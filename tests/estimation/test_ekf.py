@@ -145,12 +145,15 @@ def _ekf_reference(state: EkfState, obs: EkfObserver, model):
             Q = np.diag(st.q_rate * dt)
             Q[:3, :3] = Qd
             P = F @ P @ F.T + Q
-            if st.limit:
-                for i in range(3, m):
-                    if P[i, i] > st.p0_diag[i]:
-                        d = np.ones(m)
-                        d[i] = np.sqrt(st.p0_diag[i] / P[i, i])
-                        P = d[:, None] * P * d[None, :]
+            for i in range(3, m):
+                if st.limit == kern.LIMIT_NONE or P[i, i] <= st.p0_diag[i]:
+                    continue
+                if st.limit == kern.LIMIT_PSD:
+                    d = np.ones(m)
+                    d[i] = np.sqrt(st.p0_diag[i] / P[i, i])
+                    P = d[:, None] * P * d[None, :]
+                else:  # LIMIT_DIAG, EKF §3.1 as written: P_ii ← min(P_ii, P0_ii)
+                    P[i, i] = st.p0_diag[i]
         status[k] = 0 if model.accept[k] else 1
         if model.accept[k]:
             for j in np.flatnonzero(st.use):
@@ -190,6 +193,7 @@ CASES = [
     ("ekf-aug", ["maf", "p_im", "omega_t"], {"sigma_bias": 0.05, "sigma0_bias": 0.002}),
     ("ekf-map", ["maf"], {"sigma_theta": 0.05, "sigma0_theta": 0.02}),
     ("ekf-map", ["p_em", "maf", "omega_t"], {"limit": "none"}),
+    ("ekf-map", ["maf"], {"sigma_theta": 0.05, "sigma0_theta": 0.02, "limit": "diag"}),
 ]
 
 
@@ -220,7 +224,8 @@ def test_kernel_matches_plain_numpy_reference(name, outputs, extra, short) -> No
     assert counts[kern.C_GATE] >= 4
     assert counts[kern.C_DAMPED] >= 1
     assert_array_equal(state.P, state.P.T)
-    assert np.linalg.eigvalsh(state.P).min() > -1e-9 * np.abs(state.P).max()
+    if obs.settings.limit != kern.LIMIT_DIAG:  # the literal cap need not keep P PSD
+        assert np.linalg.eigvalsh(state.P).min() > -1e-9 * np.abs(state.P).max()
     if name != "ekf-def" and obs.settings.limit:
         assert np.diag(state.P)[3:].max() <= obs.settings.p0_diag[3] * (1 + 1e-12)
 
@@ -361,6 +366,20 @@ def test_covariance_limit_caps_parameter_variances_psd(medium) -> None:
     assert np.diag(free.P)[3:].max() > 5 * p0  # unvisited cells grow without the cap …
     assert np.diag(capped.P)[3:].max() <= p0 * (1 + 1e-12)  # … and are held at P0 with it
     assert np.linalg.eigvalsh(capped.P).min() > -1e-12 * np.abs(capped.P).max()
+
+
+def test_literal_diagonal_cap_sets_only_the_diagonal(medium) -> None:
+    """EKF §3.1 as written (``limit="diag"``): the capped variances equal P0 as with the
+    PSD form, but their covariances with the rest are not scaled down, so the runs differ
+    (the exact update is checked against the reference above)."""
+    config = {"sigma_theta": 0.02, "sigma0_theta": 0.05}
+    psd = SPECS["ekf-map"].build(config).fit(medium.signals).state
+    diag = SPECS["ekf-map"].build(config | {"limit": "diag"}).fit(medium.signals).state
+    p0 = 0.05**2
+    assert np.diag(diag.P)[3:].max() <= p0 * (1 + 1e-12)
+    assert np.isclose(np.diag(diag.P)[3:], p0, rtol=1e-9).any()
+    assert not np.array_equal(diag.P, psd.P)
+    assert not np.array_equal(diag.x, psd.x)
 
 
 def test_innovation_gate_rejects_outliers_and_counts_them(medium) -> None:
