@@ -20,6 +20,8 @@
 # ./.venv, again only when pyproject.toml changed since the last install (a stamp in .venv).
 set -euo pipefail
 cd "$(dirname "$0")/.."
+# One BLAS thread per process (tests/conftest.py says why); the servers inherit it.
+export OPENBLAS_NUM_THREADS="${OPENBLAS_NUM_THREADS:-1}"
 
 FAST_LANE="not slow and not postgres and not browser and not dask and not soak"
 fast=0

@@ -334,7 +334,8 @@ def test_reused_plant_runs_are_identical_and_independent_of_the_seed() -> None:
 
 def test_whtc_cycle_is_physically_plausible() -> None:
     t, fuel, speed = whtc_2l()
-    _sig, tr = simulate_airpath(t, fuel, speed, seed=0)
+    # the plant run of test_manifold_rho1_…, reused (bit-identical: test_reused_plant_runs_…)
+    _sig, tr = simulate_airpath(t, fuel, speed, seed=0, reuse_plant_run=True)
     assert tr.clamp_events == 0
     assert tr["p_im_pa"].min() > 0.98e5
     assert tr["p_im_pa"].max() < 3.5e5

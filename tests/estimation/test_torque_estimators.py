@@ -179,7 +179,7 @@ def start_of_step_adaptive(sig: Signals, c: AdaptiveConstConfig | AdaptiveTvConf
     return {"torque_nm": np.array(torque)}
 
 
-@numba.njit(cache=False)
+@numba.njit(cache=True)
 def _rk4_continuous(speed, load, air, J, k, ell, g1, g2, kappa, tv, K0, theta0, substeps):
     """RK4 with ``substeps`` steps per sample of the continuous TQ (9), (42), (45), (50)/(52),
     (54) on held inputs, K by its Riccati equation (no floor). Per sample: UIO, dirty
@@ -202,7 +202,7 @@ def _rk4_continuous(speed, load, air, J, k, ell, g1, g2, kappa, tv, K0, theta0, 
     return out
 
 
-@numba.njit(cache=False)
+@numba.njit(cache=True)
 def _tq_rhs(x, N, tl, m, J, k, ell, g1, g2, kappa, tv):
     nf, tlf, f1, f2, p11, p12, p22, q1, q2, k11, k12, k22, t1, t2 = x
     y = J * (N - nf) / k + tlf
