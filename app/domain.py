@@ -29,13 +29,15 @@ RESUMABLE = (RunStatus.INTERRUPTED, RunStatus.CANCELLED)
 
 class SeriesRole(StrEnum):
     """What a result series is: an operating-point input channel, the measured output, an
-    estimator output (estimate), a simulated truth, or the error truth − estimate."""
+    estimator output (estimate), a simulated truth, the error truth − estimate, or the
+    rejection mask (1 where a gate or the estimator rejected the sample, 0 where accepted)."""
 
     INPUT = "input"
     MEASURED = "measured"
     OUTPUT = "output"
     TRUTH = "truth"
     ERROR = "error"
+    REJECTED = "rejected"
 
 
 @dataclass(frozen=True, slots=True)
@@ -129,6 +131,11 @@ class RunGroup:
 
 @dataclass(frozen=True, slots=True)
 class VersionSummary:
+    """A stored version in short. ``id`` is the database's (unique over all runs);
+    ``number`` is its place 1…n in its run by step, what people, URLs and exports call it
+    ("run 12 version 3"). Derived, not stored: a resumed run that drops its later versions
+    numbers the new ones on from the last kept."""
+
     id: int
     run_id: int
     step: int
@@ -136,6 +143,7 @@ class VersionSummary:
     label: str | None
     final: bool
     created_at: datetime
+    number: int
 
 
 @dataclass(frozen=True, slots=True)
@@ -191,6 +199,8 @@ class BaseMap:
     parent_base_map_id: int | None
     metrics: dict[str, Any]
     created_at: datetime
+    # The promoted version's number 1…n in its run; None for a file or a version since deleted.
+    version_number: int | None = None
 
 
 @dataclass(frozen=True, slots=True)

@@ -111,6 +111,31 @@ def torque_metrics(
     }
 
 
+def running_ise(
+    time_s: np.ndarray, error_nm: np.ndarray, *, window_s: Sequence[float] = TORQUE_WINDOW_S
+) -> np.ndarray:
+    """ISE so far at every sample: ``ISE(t) = Σ_{t_k ∈ window, t_k ≤ t} τ̃_k² Δt_k`` (TQ (60)
+    by the rectangle rule of :func:`torque_metrics`, ``Δt_k = t_{k+1} − t_k``), 0 before the
+    window and constant after it, so its last value is :func:`torque_metrics`' ``ise``.
+    ``window_s`` is absolute time; samples not computed yet (NaN) add nothing. N²·m²·s."""
+    t = np.asarray(time_s, dtype=np.float64)
+    e = np.asarray(error_nm, dtype=np.float64)
+    if t.shape != e.shape:
+        raise ShapeError(f"time has shape {t.shape}, error {e.shape}")
+    if t.size < 2:
+        return np.zeros_like(t)
+    lo, hi = window_s
+    dt = np.diff(t, append=t[-1] + (t[-1] - t[-2]))
+    inside = (t >= lo) & (t <= hi) & np.isfinite(e)
+    return np.cumsum(np.where(inside, np.square(np.where(inside, e, 0.0)) * dt, 0.0))
+
+
+def torque_window(time_s: np.ndarray) -> tuple[float, float]:
+    """The scoring window of a record: 5–30 s after its first sample, cut at its last."""
+    t = np.asarray(time_s, dtype=np.float64)
+    return (float(t[0] + TORQUE_WINDOW_S[0]), float(min(t[0] + TORQUE_WINDOW_S[1], t[-1])))
+
+
 def convergence_time(time_s: np.ndarray, error: np.ndarray, threshold: float) -> float | None:
     """First time after which ``error`` stays at or below ``threshold`` (``None`` if never)."""
     t = np.asarray(time_s, dtype=np.float64)

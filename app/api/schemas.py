@@ -143,6 +143,15 @@ class PreviewOut(BaseModel):
     channels: dict[str, PreviewChannel]
 
 
+class RunGroupRefOut(BaseModel):
+    """The sweep or batch a run belongs to (in ``GET /api/runs`` lists)."""
+
+    id: int
+    kind: Literal["sweep", "batch"]
+    name: str
+    size: int = Field(description="How many runs the group holds now.")
+
+
 class RunOut(BaseModel):
     id: int
     dataset_id: int
@@ -168,10 +177,16 @@ class RunOut(BaseModel):
     attempt: int = Field(description="Executions so far; each checks its number on every write.")
     lost_attempts: int = Field(description="Attempts whose worker died (failed after a few).")
     heartbeat_at: datetime | None = Field(description="Last sign of life of the attempt.")
+    group_id: int | None = Field(None, description="The sweep or batch the run belongs to.")
+    group: RunGroupRefOut | None = Field(
+        None, description="That sweep or batch, named (in GET /api/runs lists; else null)."
+    )
 
     @classmethod
-    def of(cls, r: Run) -> RunOut:
+    def of(cls, r: Run, group: RunGroupRefOut | None = None) -> RunOut:
         return cls(
+            group_id=r.group_id,
+            group=group,
             id=r.id,
             dataset_id=r.dataset_id,
             estimator=r.estimator,
@@ -200,7 +215,11 @@ class RunOut(BaseModel):
 
 
 class VersionSummaryOut(BaseModel):
-    id: int
+    id: int = Field(description="The database id (unique over all runs).")
+    number: int = Field(
+        description="The version's place 1…n in its run by step: what the dashboard's URLs "
+        "(?version=N, a=RUN:N), export headers and base-map names call it."
+    )
     run_id: int
     step: int
     time_s: float
@@ -212,6 +231,7 @@ class VersionSummaryOut(BaseModel):
     def of(cls, v: VersionSummary) -> VersionSummaryOut:
         return cls(
             id=v.id,
+            number=v.number,
             run_id=v.run_id,
             step=v.step,
             time_s=v.time_s,
@@ -233,12 +253,18 @@ class VersionOut(VersionSummaryOut):
     variances: Nested | None
     visits: Nested | None
     rejected: dict[str, int]
+    cell_rejections: dict[str, Nested] = Field(
+        default_factory=dict,
+        description="Per cell, by reason (as in rejected): the interpolation weight of the "
+        "samples rejected so far, in samples; empty for estimators without a map.",
+    )
 
     @classmethod
     def of_version(cls, v: MapVersion) -> VersionOut:
         s = v.summary
         return cls(
             id=s.id,
+            number=s.number,
             run_id=s.run_id,
             step=s.step,
             time_s=s.time_s,
@@ -250,6 +276,9 @@ class VersionOut(VersionSummaryOut):
             variances=nested_or_none(v.variances),
             visits=nested_or_none(v.visits),
             rejected=v.rejected,
+            cell_rejections={
+                k: nested_or_none(x) or [] for k, x in (v.cell_rejections or {}).items()
+            },
         )
 
 
@@ -259,12 +288,26 @@ class LabelIn(BaseModel):
     label: str | None = Field(max_length=200)
 
 
+class RunRenameIn(BaseModel):
+    """Body of ``PATCH /api/runs/{id}``."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    name: str = Field(
+        min_length=1,
+        max_length=200,
+        json_schema_extra=name_schema,
+        description="The run's new name (not blank).",
+    )
+
+
 class SeriesLine(BaseModel):
     unit: str
     role: SeriesRole | None = Field(
         None,
-        description="input, measured, output (an estimate), truth or error; null for a "
-        "series stored before roles were recorded.",
+        description="input, measured, output (an estimate), truth, error or rejected (1 "
+        "where a gate or the estimator rejected the sample, 0 where accepted; each bucket's "
+        "maximum when decimated); null for a series stored before roles were recorded.",
     )
     values: list[float | None]
 
@@ -291,6 +334,11 @@ class CompareOut(BaseModel):
 class LineageOut(BaseModel):
     run_id: int | None
     version_id: int | None
+    version_number: int | None = Field(
+        None,
+        description="The version's number 1…n in its run; null for a file or once the version "
+        "is deleted.",
+    )
     dataset_id: int | None
     estimator: str | None
     config: dict[str, Any] | None
@@ -318,6 +366,7 @@ class BaseMapOut(BaseModel):
             lineage=LineageOut(
                 run_id=b.run_id,
                 version_id=b.version_id,
+                version_number=b.version_number,
                 dataset_id=b.dataset_id,
                 estimator=b.estimator,
                 config=b.config,
@@ -333,11 +382,49 @@ class PromoteIn(BaseModel):
 
     run_id: int = Field(ge=1, le=2**31 - 1)
     version_id: int = Field(ge=1, le=2**31 - 1)
-    name: str = Field(min_length=1, max_length=200)
+    name: str | None = Field(
+        None,
+        min_length=1,
+        max_length=200,
+        description='Default: "<run name or run R> v<N>", N the version\'s number in its run.',
+    )
+    # An edited map (the run view's editor): the version's grid with these values instead.
+    values: Nested | None = Field(
+        None,
+        description="The edited grid, nested like the version's values (one level per axis), "
+        "finite numbers. Without it the version's own values are saved.",
+    )
+    edits: list[dict[str, Any]] | None = Field(
+        None,
+        max_length=2000,
+        description="The editing operations that led to `values` (kept as lineage.config.edits).",
+    )
+    source: Literal["run", "edit"] | None = Field(
+        None, description='"edit" when values or edits are given, else "run".'
+    )
 
 
 class CatalogOut(BaseModel):
     items: list[dict[str, Any]]
+
+
+class EstimatorSetupOut(BaseModel):
+    """One estimator's start on a simulated dataset: what a run request's ``table``,
+    ``signals`` and ``config`` get."""
+
+    table: dict[str, Any] | None
+    signals: dict[str, str]
+    config: dict[str, Any]
+
+
+class DatasetSetupOut(BaseModel):
+    """The scenario's own setup of a simulated dataset (GET /api/datasets/{id}/setup)."""
+
+    scenario: str | None
+    seed: int | None
+    mismatch: str | None
+    suggested: list[str]
+    estimators: dict[str, EstimatorSetupOut]
 
 
 class GroupRunOut(BaseModel):

@@ -1,13 +1,19 @@
 """CSV uploads: decode the bytes, then the shared reader
 :func:`app.io.csv_files.parse_sparse_csv` (every column numeric; an empty cell is no sample
-of that channel)."""
+of that channel).
+
+A CSV without a time column has no time base. An upload (``time_required``) refuses it,
+naming ``time``, unless the rows' sample rate is given (``rate_hz``: row k at k / rate s),
+which is then stated in the dataset's notes; guessing 1 Hz would silently put every map
+and metric on the wrong time scale."""
 
 from __future__ import annotations
 
+import dataclasses
 import re
 from collections.abc import Mapping
 
-from app.io.csv_files import DELIMITERS, SparseCsv, parse_sparse_csv, split_lines
+from app.io.csv_files import DELIMITERS, TIME_COLUMNS, SparseCsv, parse_sparse_csv, split_lines
 from app.io.errors import InputError, unsupported
 
 _BINARY = re.compile(r"[\x00-\x08\x0b\x0e-\x1f\x7f]")
@@ -20,8 +26,12 @@ def read_csv_upload(
     time_column: str | None,
     max_header_bytes: int,
     max_channels: int,
+    rate_hz: float | None = None,
+    time_required: bool = False,
 ) -> tuple[SparseCsv, list[str]]:
-    """The columns and notes of a CSV upload (UTF-8, else Latin-1)."""
+    """The columns and notes of a CSV upload (UTF-8, else Latin-1). ``rate_hz``: the rows'
+    sample rate, for a file without a time column only; ``time_required``: refuse such a
+    file when no rate is given (else its time is the sample index, 1 Hz, as noted)."""
     notes: list[str] = []
     try:
         text = data.decode("utf-8-sig")
@@ -43,7 +53,26 @@ def read_csv_upload(
     )
     if log.decimal == ",":
         notes.append("decimal comma")
-    if log.time_column is None:
+    if log.time_column is not None:
+        if rate_hz is not None:
+            raise InputError(
+                f"rate_hz is only for a file without a time column; this file's time column "
+                f"is {log.time_column!r}",
+                field="rate_hz",
+                line=None,
+            )
+    elif rate_hz is not None:
+        log = dataclasses.replace(log, time=log.time / rate_hz)
+        notes.append(f"no time column: rows taken at the given rate of {rate_hz:g} Hz")
+    elif time_required:
+        raise InputError(
+            "the file has no time column (one of "
+            f"{', '.join(TIME_COLUMNS)}, in seconds); add one, or give the rows' sample "
+            "rate as rate_hz",
+            field="time",
+            line=None,
+        )
+    else:
         notes.append("no time column: time is the sample index (1 Hz)")
     return log, notes
 

@@ -14,32 +14,41 @@ def minmax_decimate(
 
     The log is cut into ``points // 2`` buckets; each contributes two samples at its first
     and last time, carrying every channel's minimum and maximum in the order they occur,
-    so spikes survive (the time of an extreme moves by less than one bucket).
+    so spikes survive (the time of an extreme moves by less than one bucket). NaN and ±Inf
+    are skipped; a bucket with no finite value gives NaN twice. Of equal extremes the first
+    counts. Decimating a decimated series again keeps the same extremes (the minimum of
+    minima is the minimum), so storage and serving may both decimate.
+
+    Vectorised per channel: bucket extremes by ``np.minimum.reduceat`` /
+    ``np.maximum.reduceat``, their first positions by a second ``reduceat`` over the sample
+    indices where a sample equals its bucket's extreme (O(n) with no Python loop per bucket).
     """
     n = time.size
-    if n <= points or points < 4:
+    if n <= points or points < 2:
         return time.copy(), {k: np.asarray(v).copy() for k, v in channels.items()}
     buckets = points // 2
+    # n > points ≥ 2·buckets, so every bucket holds at least two samples.
     edges = np.linspace(0, n, buckets + 1).astype(np.int64)
     starts, stops = edges[:-1], edges[1:]
+    sizes = stops - starts
     out_time = np.empty(2 * buckets)
     out_time[0::2] = time[starts]
     out_time[1::2] = time[stops - 1]
+    index = np.arange(n)
     out: dict[str, np.ndarray] = {}
     for name, values in channels.items():
         v = np.asarray(values, dtype=np.float64)
-        finite = np.where(np.isfinite(v), v, np.nan)
-        lo = np.empty(buckets)
-        hi = np.empty(buckets)
-        lo_first = np.empty(buckets, dtype=bool)
-        for b, (a, z) in enumerate(zip(starts, stops, strict=True)):
-            seg = finite[a:z]
-            if np.all(np.isnan(seg)):
-                lo[b] = hi[b] = np.nan
-                lo_first[b] = True
-                continue
-            i_lo, i_hi = int(np.nanargmin(seg)), int(np.nanargmax(seg))
-            lo[b], hi[b], lo_first[b] = seg[i_lo], seg[i_hi], i_lo <= i_hi
+        finite = np.isfinite(v)
+        lo = np.minimum.reduceat(np.where(finite, v, np.inf), starts)
+        hi = np.maximum.reduceat(np.where(finite, v, -np.inf), starts)
+        empty = np.add.reduceat(finite.astype(np.int64), starts) == 0
+        at_lo = finite & (v == np.repeat(lo, sizes))
+        at_hi = finite & (v == np.repeat(hi, sizes))
+        i_lo = np.minimum.reduceat(np.where(at_lo, index, n), starts)
+        i_hi = np.minimum.reduceat(np.where(at_hi, index, n), starts)
+        lo_first = empty | (i_lo <= i_hi)
+        lo[empty] = np.nan
+        hi[empty] = np.nan
         pair = np.empty(2 * buckets)
         pair[0::2] = np.where(lo_first, lo, hi)
         pair[1::2] = np.where(lo_first, hi, lo)

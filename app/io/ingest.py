@@ -112,6 +112,8 @@ def ingest(
     limits: IngestLimits | None = None,
     channels: Sequence[str] | None = None,
     raster: str | None = None,
+    rate_hz: float | None = None,
+    time_required: bool = False,
 ) -> ParsedLog:
     """Parse and validate an uploaded log.
 
@@ -120,13 +122,21 @@ def ingest(
     ``time_column``: the time column/field; default the first of ``time, time_s, t,
     timestamp, timestamps`` present. ``channels``: the channels to keep (default all).
     ``raster``: ``"100Hz"``, ``"10ms"``, ``"channel:NAME"`` (:func:`parse_raster`); default
-    the slowest kept channel's raster.
+    the slowest kept channel's raster. ``rate_hz``: the sample rate of a CSV without a time
+    column; ``time_required``: refuse such a CSV without it (uploads do, see
+    :func:`app.io.csv_upload.read_csv_upload`).
     """
     limits = limits or IngestLimits()
     wanted = list(channels) if channels is not None else None
     grid = parse_raster(raster)  # a bad raster fails before the file is read
     data = _read_bounded(source, limits.max_bytes)
     kind = detect_format(data[:4096])
+    if rate_hz is not None and kind != "csv":
+        raise InputError(
+            f"rate_hz is only for a CSV without a time column; a {kind.upper()} file has "
+            "its own timestamps",
+            field="rate_hz",
+        )
     notes: list[str]
     if kind == "mcap":
         from app.io.mcap_files import read_mcap
@@ -150,6 +160,8 @@ def ingest(
             time_column=time_column,
             max_header_bytes=limits.max_header_bytes,
             max_channels=limits.max_channels,
+            rate_hz=rate_hz,
+            time_required=time_required,
         )
         used_time = log.time_column
         tracks = _sparse_tracks(log.time, log.columns, log.units, log.empty, grid, notes)

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from app.io.decimate import finite_or_none, nested_or_none, stride_decimate
+from app.io.decimate import finite_or_none, minmax_decimate, nested_or_none, stride_decimate
 from app.runs.frames import StartMessage, StatusFrame, TickMessage
 from app.runs.results import RunResults
 from app.runs.results import finite_or_none as finite_scalar
@@ -93,9 +93,18 @@ class LiveTicks:
             points = signals.stack([ax.name for ax in table.axes])[index]
             trajectory = {"time": finite_or_none(time_s), "points": points.tolist()}
             active = results.active_cell(z)
+        # The series keep each bucket's extremes (a one-sample spike shows while the run
+        # goes); the trail needs no more than evenly spread points.
+        lines = results.lines()
+        series_time, series_values = minmax_decimate(
+            signals.time[a:z], {x.name: x.values[a:z] for x in lines}, LIVE_POINTS_PER_TICK
+        )
         series = {
-            x.name: {"time": finite_or_none(time_s), "values": finite_or_none(x.values[index])}
-            for x in results.lines()
+            x.name: {
+                "time": finite_or_none(series_time),
+                "values": finite_or_none(series_values[x.name]),
+            }
+            for x in lines
         }
         live_metrics = dict(metrics or {})
         rmse = results.live_rmse()

@@ -14,9 +14,12 @@ rejecting it (:meth:`GateResult.first_gate`).
 
 The result series are namespaced by role (:class:`SeriesRole`): the operating-point
 input channels, the measured output, the estimator's outputs (estimates), the simulated
-truths and the errors truth − estimate. Each has a key unique within the run: its name,
-or ``role:name`` where an earlier role already has that name (an EKF estimates
-``p_im_pa``, which is also one of its input channels).
+truths, the errors truth − estimate and the rejection mask (``rejected``: 1 where the
+sample was rejected, by a gate or the estimator, 0 where accepted, NaN before it was
+processed; stored decimated by max per bucket, so no rejection is lost; present when the
+run has gates or rejected a sample). Each has a key unique within the run: its name, or
+``role:name`` where an earlier role already has that name (an EKF estimates ``p_im_pa``,
+which is also one of its input channels).
 """
 
 from __future__ import annotations
@@ -27,13 +30,13 @@ from typing import Any
 import numpy as np
 
 from app.domain import Dataset, ResumePoint, Run, Series, SeriesRole
-from app.io.decimate import stride_decimate
+from app.io.decimate import minmax_decimate
 from app.io.payload import Truth
 from app.runs.gates import GateResult, cell_counts, nearest_cell
 from estimation.errors import EstimationError
 from estimation.estimator import Snapshot
 from estimation.holdout import holdout_error
-from estimation.metrics import score_run
+from estimation.metrics import running_ise, score_run, torque_window
 from estimation.registry import EstimatorKind, EstimatorSpec
 from estimation.signals import Signals
 from estimation.table import Table
@@ -71,6 +74,7 @@ class RunResults:
         self.sq_sum = 0.0  # running Σ residual² over accepted samples
         self.sq_n = 0
         self._gate_masks = None if gates is None else gates.first_gate()
+        self._first_gate_cache: tuple[int, np.ndarray] | None = None
 
     # -- accumulation -------------------------------------------------------------------------
 
@@ -118,11 +122,39 @@ class RunResults:
         return segment
 
     def run_rejected(self) -> dict[str, int]:
-        """Rejected samples by reason: the estimator's, then ``gate:<label>``."""
+        """Rejected samples by reason: the estimator's, then ``gate:<label>``.
+
+        The estimator's reasons are disjoint (one status code per sample), so their sum is
+        the run's total. Where it counts the accept mask (``mask``), the gates split that
+        count: each masked sample so far (status 1) goes to the first gate, in the run's
+        list, that rejects it, so ``Σ gate:* == mask`` at every moment (a sample failing
+        two gates counts once). With a sensor delay τ a masked step pairs measurement k
+        with operating point k − τ, and either being gated masks it. An estimator that
+        does not count the mask gets the gates' whole-log counts (first gate wins too).
+        """
         out = dict(self.rejected)
-        if self.gates is not None:
-            out |= {f"gate:{k}": int(v) for k, v in self.gates.rejected.items()}
-        return out
+        if self.gates is None:
+            return out
+        labels = list(self.gates.masks)
+        if "mask" not in out or not labels:
+            return out | {f"gate:{k}": int(v) for k, v in self.gates.rejected.items()}
+        first = self._first_gate(int(out.get("delay", 0)))[self.status == 1]
+        counts = np.bincount(first[first >= 0], minlength=len(labels))
+        return out | {f"gate:{k}": int(c) for k, c in zip(labels, counts, strict=True)}
+
+    def _first_gate(self, tau: int) -> np.ndarray:
+        """``(n,)`` index (in the gate list) of the first gate rejecting sample k or k − τ;
+        −1 where none does. Cached: it depends only on the log and τ."""
+        if self._first_gate_cache is None or self._first_gate_cache[0] != tau:
+            assert self.gates is not None
+            first = np.full(self.n, -1, dtype=np.int16)
+            for i, mask in enumerate(self.gates.masks.values()):
+                hit = mask.copy()
+                if 0 < tau < self.n:
+                    hit[tau:] |= mask[:-tau]
+                first[(first < 0) & hit] = i
+            self._first_gate_cache = (tau, first)
+        return self._first_gate_cache[1]
 
     def live_rmse(self) -> float | None:
         """RMS residual of the accepted samples so far."""
@@ -196,6 +228,14 @@ class RunResults:
                     raw.append((f"{name}_true", SeriesRole.TRUTH, unit, truth))
                     error = truth - self.outputs[name]
                     raw.append((f"{name}_error", SeriesRole.ERROR, unit, error))
+                    if name == "torque_nm":  # the run view's running ISE (TQ (60))
+                        t = self.signals.time
+                        ise = running_ise(t, error, window_s=torque_window(t))
+                        raw.append((f"{name}_ise", SeriesRole.ERROR, "N²·m²·s", ise))
+        # With gates from the start (a stable set of lines); else once a sample is rejected.
+        rejected = self.rejection_mask()
+        if self.gates is not None or np.nansum(rejected) > 0:
+            raw.append(("rejected", SeriesRole.REJECTED, "", rejected))
         out: list[Series] = []
         taken: set[str] = set()
         for name, role, unit, values in raw:
@@ -204,11 +244,30 @@ class RunResults:
             out.append(Series(key, unit, self.signals.time, values, role))
         return out
 
+    def rejection_mask(self) -> np.ndarray:
+        """``(n,)`` 1.0 where sample k was rejected (status code > 0: the accept mask, the
+        innovation gate, the sensor delay; or a sample gate, also for an estimator that does
+        not take the accept mask), 0.0 where accepted, NaN where not yet processed.
+
+        Its sum over the processed samples is the run's number of rejected samples; for an
+        estimator that counts the mask that is ``Σ`` of its reasons in :meth:`run_rejected`
+        (``gate:*`` split ``mask``). Min/max decimation keeps a 1 in every bucket that has one.
+        """
+        done = self.status >= 0
+        hit = self.status > 0
+        if self.gates is not None:
+            hit = hit | ~self.gates.accept
+        return np.where(done, hit.astype(np.float64), np.nan)
+
     def series(self, points: int) -> list[Series]:
-        """:meth:`lines` at most ``points`` samples long (stride-decimated), for storage."""
-        index = stride_decimate(self.n, points)
-        time_s = self.signals.time[index]
-        return [Series(x.name, x.unit, time_s, x.values[index], x.role) for x in self.lines()]
+        """:meth:`lines` at most ``points`` samples long, for storage: min/max per bucket
+        (:func:`minmax_decimate`) so a one-sample spike of an error stays in the stored
+        series (a stride would keep one sample in ``n / points`` and lose it)."""
+        lines = self.lines()
+        time_s, values = minmax_decimate(
+            self.signals.time, {x.name: x.values for x in lines}, points
+        )
+        return [Series(x.name, x.unit, time_s, values[x.name], x.role) for x in lines]
 
     def _unit(self, name: str, out_unit: str) -> str:
         """The spec's unit of an output; ``""`` there means the output channel's unit."""

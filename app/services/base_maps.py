@@ -10,6 +10,7 @@ from app.domain import BaseMap, Page
 from app.errors import ConflictError, InvalidRequestError
 from app.io.names import check_name, without_refused
 from app.services.admission import OverBudgetError
+from app.services.base_map_edits import EditedMap
 
 NAME_MAX = 200
 
@@ -19,22 +20,24 @@ class BaseMapService:
         self.db = db
         self.max_cells = max_cells  # MAPWISE_MAX_CELLS; None: no cap
 
-    def promote(self, *, run_id: int, version_id: int, name: str) -> BaseMap:
+    def promote(
+        self, *, run_id: int, version_id: int, name: str | None, edited: EditedMap | None = None
+    ) -> BaseMap:
         with self.db.write() as s:
             run = RunRepo(s).get(run_id)
             version = VersionRepo(s).get(run_id, version_id)
             if version.values is None or version.axes is None:
                 raise ConflictError(f"run {run_id} ({run.estimator}) has no map", field="run_id")
             return BaseMapRepo(s).add(
-                name=_name(name, None),
-                source="run",
+                name=_name(name, None, promoted_name(run.name, run.id, version.summary.number)),
+                source="run" if edited is None else "edit",
                 axes=version.axes,
-                values=version.values,
+                values=version.values if edited is None else edited.values_for(version),
                 run_id=run.id,
                 version_id=version.summary.id,
                 dataset_id=run.dataset_id,
                 estimator=run.estimator,
-                config=run.config,
+                config=run.config if edited is None else edited.config(run.config),
                 parent_base_map_id=run.base_map_id,
                 metrics=run.metrics,
             )
@@ -65,6 +68,12 @@ class BaseMapService:
     def list(self, *, limit: int, offset: int) -> Page[BaseMap]:
         with self.db.read() as s:
             return BaseMapRepo(s).list(limit=limit, offset=offset)
+
+
+def promoted_name(run_name: str | None, run_id: int, number: int) -> str:
+    """The default name of a promoted version: "<run name or run R> v<N>", N the version's
+    number 1…n in its run (what the dashboard's URLs and export headers call it)."""
+    return f"{(run_name or '').strip() or f'run {run_id}'} v{number}"[:NAME_MAX]
 
 
 def _name(name: str | None, filename: str | None, fallback: str = "") -> str:

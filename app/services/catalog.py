@@ -4,7 +4,9 @@ An estimator's *signal roles* are the channels a run maps dataset columns to: ``
 measured table output) for the table filters; for the observers, every config field that
 names a channel (a string field with a channel-name default, e.g. ``speed_channel`` or
 ``p_im``; nested sections as ``channels.p_im``). The config schema shown to the UI leaves
-out what the run request supplies separately (axes, channels, output).
+out what the run request supplies separately (axes, channels, output), and gives every
+property a ``source``: the paper value its default is, or "mapwise default"
+(:mod:`estimation.default_sources`).
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, Field
 
+from estimation.default_sources import annotate
 from estimation.registry import EstimatorKind, EstimatorSpec, registry
 from estimation.scenarios import scenarios
 
@@ -103,8 +106,9 @@ def role_keys(spec: EstimatorSpec) -> set[str]:
 
 
 def config_schema(spec: EstimatorSpec) -> tuple[dict[str, Any], dict[str, Any]]:
-    """The config JSON schema and defaults, without the keys a run request fills in."""
-    schema = spec.config_model.model_json_schema()
+    """The config JSON schema (each property with its default's ``source``) and defaults,
+    without the keys a run request fills in."""
+    schema = annotate(spec.config_model.model_json_schema(), spec.config_model)
     hidden = role_keys(spec)
     props = {k: v for k, v in schema.get("properties", {}).items() if k not in hidden}
     schema = {**schema, "properties": props}

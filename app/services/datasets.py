@@ -53,15 +53,25 @@ class DatasetService:
         max_decompressed_bytes: int = IngestLimits.max_decompressed_bytes,
         channels: Sequence[str] | None = None,
         raster: str | None = None,
+        rate_hz: float | None = None,
     ) -> Dataset:
         """Parse and validate the whole file first; store it only if it is usable, with
         what ingest said about it: its notes and the masked samples per channel
         (`docs/data-formats.md#multi-rate`). ``channels``: the channels to keep (default
         all); ``raster``: ``100Hz``, ``10ms`` or ``channel:NAME`` (default the slowest kept
-        channel's raster)."""
+        channel's raster); ``rate_hz``: the rows' sample rate of a CSV without a time
+        column, which is refused without it (a guessed time base is no time base)."""
         given = _dataset_name(name, filename, "")  # a bad name fails before the file is read
         limits = IngestLimits(max_bytes=max_bytes, max_decompressed_bytes=max_decompressed_bytes)
-        parsed = ingest(source, units=units, limits=limits, channels=channels, raster=raster)
+        parsed = ingest(
+            source,
+            units=units,
+            limits=limits,
+            channels=channels,
+            raster=raster,
+            rate_hz=rate_hz,
+            time_required=True,
+        )
         with self.db.write() as s:
             return DatasetRepo(s).add(
                 name=given or f"{parsed.source} upload",

@@ -23,13 +23,15 @@ from app.domain import (
     VersionSummary,
 )
 from app.errors import ConflictError, InvalidRequestError
-from app.io.decimate import stride_decimate
+from app.io.decimate import minmax_decimate
 from app.io.errors import InputError
 from app.io.map_json import map_document
+from app.io.names import check_name
 from app.io.payload import unpack_signals
 from app.runs.frames import StatusFrame
 from app.services import calibration_runs as cal
 from app.services.admission import GroupBudget, Limits
+from app.services.run_clone import CloneRequest, request_of
 from app.services.run_plan import RunRequest, plan_run
 from estimation.estimator import Snapshot
 from estimation.signals import Signals
@@ -49,6 +51,16 @@ class Download:
     content: bytes
     media_type: str
     filename: str
+
+
+@dataclass(frozen=True, slots=True)
+class GroupRef:
+    """The sweep or batch a run belongs to, as a runs list shows it."""
+
+    id: int
+    kind: str
+    name: str
+    size: int
 
 
 def table_of(version: MapVersion) -> Table:
@@ -144,10 +156,64 @@ class RunService:
             return RunRepo(s).get(run_id)
 
     def list(
-        self, *, limit: int, offset: int, dataset_id: int | None, status: RunStatus | None
+        self,
+        *,
+        limit: int,
+        offset: int,
+        dataset_id: int | None,
+        status: RunStatus | None,
+        q: str | None = None,
+        estimator: str | None = None,
+        group_id: int | None = None,
+        top_level: bool = False,
     ) -> Page[Run]:
+        """A page of runs, newest first (filters: :meth:`RunRepo.list`)."""
         with self.db.read() as s:
-            return RunRepo(s).list(limit=limit, offset=offset, dataset_id=dataset_id, status=status)
+            return RunRepo(s).list(
+                limit=limit,
+                offset=offset,
+                dataset_id=dataset_id,
+                status=status,
+                q=q,
+                estimator=estimator,
+                group_id=group_id,
+                top_level=top_level,
+            )
+
+    def groups_of(self, runs: list[Run]) -> dict[int, GroupRef]:
+        """The sweep or batch of each grouped run in ``runs``, by group id."""
+        ids = {r.group_id for r in runs if r.group_id is not None}
+        with self.db.read() as s:
+            repo = RunRepo(s)
+            refs, sizes = repo.group_refs(ids), repo.group_sizes(ids)
+        return {
+            gid: GroupRef(gid, kind, name, sizes.get(gid, 0)) for gid, (kind, name) in refs.items()
+        }
+
+    # -- management ---------------------------------------------------------------------------
+
+    def rename(self, run_id: int, name: str) -> Run:
+        """Give the run a new name (422 naming ``name`` when blank or with control
+        characters; the length is checked by the request model)."""
+        clean = check_name(name, field="name", what="run name")
+        if not clean:
+            raise InvalidRequestError("a run name may not be empty", field="name")
+        with self.db.write() as s:
+            return RunRepo(s).rename(run_id, clean)
+
+    def delete(self, run_id: int) -> int:
+        """Delete a finished run with its versions, metrics and series; return how many
+        versions went. A queued or running run is refused (409 naming its status): cancel
+        it first, so deleting never silently stops work. A sweep's or batch's run may go
+        (the group's counts are computed from its remaining runs); base maps promoted from
+        the run keep their lineage, which is a record, not a reference."""
+        with self.db.write() as s:
+            return RunRepo(s).delete(run_id, unless=(RunStatus.QUEUED, RunStatus.RUNNING))
+
+    def clone(self, run_id: int, overrides: CloneRequest | None = None) -> Run:
+        """A new queued run like ``run_id`` (name "<name> (copy)"), with ``overrides``,
+        validated and stored exactly as ``POST /api/runs`` would (:meth:`create`)."""
+        return self.create(request_of(self.get(run_id), overrides))
 
     def cancel(self, run_id: int) -> Run:
         with self.db.write() as s:
@@ -194,6 +260,12 @@ class RunService:
             RunRepo(s).get(run_id)
             return VersionRepo(s).get(run_id, version_id)
 
+    def version_by_number(self, run_id: int, number: int) -> MapVersion:
+        """Version ``number`` (1…n by step) of the run, as URLs and exports name it."""
+        with self.db.read() as s:
+            RunRepo(s).get(run_id)
+            return VersionRepo(s).by_number(run_id, number)
+
     def latest_version(self, run_id: int) -> MapVersion | None:
         with self.db.read() as s:
             RunRepo(s).get(run_id)
@@ -206,16 +278,17 @@ class RunService:
     # -- results --------------------------------------------------------------------------------
 
     def series(self, run_id: int, *, points: int) -> tuple[np.ndarray, list[Series]]:
+        """The stored result series on their shared time base, at most ``points`` samples
+        (REST ``/runs/{id}/series`` and the stream's full frame of a finished run)."""
         with self.db.read() as s:
             RunRepo(s).get(run_id)
             stored = MetricRepo(s).series(run_id)
         if not stored:
             return np.empty(0), []
-        time = stored[0].time
-        index = stride_decimate(time.size, points)
-        return time[index], [
-            Series(x.name, x.unit, x.time[index], x.values[index], x.role) for x in stored
-        ]
+        # Min/max per bucket, not a stride: a one-sample spike (an error's maximum) stays
+        # visible however far the series is thinned.
+        time, values = minmax_decimate(stored[0].time, {x.name: x.values for x in stored}, points)
+        return time, [Series(x.name, x.unit, time, values[x.name], x.role) for x in stored]
 
     def cells(self, run_id: int) -> MapVersion | None:
         return self.latest_version(run_id)
@@ -232,20 +305,35 @@ class RunService:
     # -- export ---------------------------------------------------------------------------------
 
     def export(
-        self, run_id: int, *, fmt: str, version_id: int | None, part: str | None
+        self,
+        run_id: int,
+        *,
+        fmt: str,
+        version_id: int | None,
+        part: str | None,
+        number: int | None = None,
     ) -> Download:
+        """The run (or one version: ``version_id`` the database id, or ``number`` its place
+        1…n in the run; neither: the final or latest) as a file. Map files are named
+        ``run<R>-<estimator>-v<N>`` and a DCM header says "run R …, version N"."""
         if fmt not in EXPORT_FORMATS:
             raise InvalidRequestError(
                 f"format must be one of {', '.join(EXPORT_FORMATS)}, got {fmt!r}", field="format"
             )
+        if version_id is not None and number is not None:
+            raise InvalidRequestError(
+                "give the version by id (version) or by number (number), not both",
+                field="number",
+            )
         with self.db.read() as s:
             run = RunRepo(s).get(run_id)
             versions = VersionRepo(s)
-            version = (
-                versions.get(run_id, version_id)
-                if version_id is not None
-                else versions.latest(run_id)
-            )
+            if version_id is not None:
+                version = versions.get(run_id, version_id)
+            elif number is not None:
+                version = versions.by_number(run_id, number)
+            else:
+                version = versions.latest(run_id)
         stem = _safe_name(f"run{run.id}-{run.estimator}")
         if fmt == "mcap":
             return Download(self._mcap(run), "application/octet-stream", f"{stem}.mcap")
@@ -255,6 +343,7 @@ class RunService:
             raise InvalidRequestError("part must be 'map' or 'series'", field="part")
         if version is None:
             raise ConflictError(f"run {run_id} has no map version yet", field="version")
+        stem = f"{stem}-v{version.summary.number}"
         required = fmt in cal.CALIBRATION_FORMATS
         linked = None
         if fmt != "csv":  # a CSV grid is the same with or without a link
@@ -286,7 +375,7 @@ class RunService:
         from app.io.export import map_to_dcm
 
         name = _safe_name(str(output or run.estimator)).upper()
-        description = f"mapwise run {run.id} ({run.estimator}), version {version.summary.id}"
+        description = _dcm_description(run, version)
         text = map_to_dcm(table, name=name, unit=unit, description=description)
         return Download(text.encode(), "text/plain; charset=utf-8", f"{stem}.dcm")
 
@@ -302,7 +391,7 @@ class RunService:
         """DCM / CDFX keyed by the A2L name, or the patched memory image, of a linked run."""
         name = _safe_name(linked.char.name)
         if fmt == "dcm":
-            description = f"mapwise run {run.id} ({run.estimator}), version {version.summary.id}"
+            description = _dcm_description(run, version)
             text = cal.dcm_text(linked.char, table, description=description)
             return Download(text.encode(), "text/plain; charset=utf-8", f"{stem}-{name}.dcm")
         if fmt == "cdfx":
@@ -395,6 +484,13 @@ class RunService:
         signals = self._run_signals(run)
         channels = {n: (signals.units.get(n, ""), signals[n]) for n in signals.names}
         return series_to_csv(signals.time, channels).encode()
+
+
+def _dcm_description(run: Run, version: MapVersion) -> str:
+    """The DCM header line of an exported version: the run and the version's number 1…n in
+    it (what the dashboard shows and links), the database id kept for traceability."""
+    v = version.summary
+    return f"mapwise run {run.id} ({run.estimator}), version {v.number} (id {v.id}, step {v.step})"
 
 
 def _json_bytes(document: dict[str, Any]) -> bytes:

@@ -9,6 +9,7 @@ from fastapi import APIRouter, Query, Request
 from app.api.deps import MAX_ID, Id, ServicesDep
 from app.api.schemas import ERRORS, BaseMapOut, PageOut, PromoteIn
 from app.errors import InvalidRequestError, MalformedRequestError
+from app.services.base_map_edits import edited_map
 
 router = APIRouter(prefix="/base-maps", tags=["base maps"], responses=ERRORS)
 
@@ -35,7 +36,8 @@ _BODY = {
 
 @router.post("", status_code=201, response_model=BaseMapOut, openapi_extra=_BODY)
 async def create_base_map(request: Request, services: ServicesDep) -> BaseMapOut:
-    """JSON ``{run_id, version_id, name}`` promotes a run's map version; multipart ``file``
+    """JSON ``{run_id, version_id, name}`` promotes a run's map version (with ``values`` and
+    ``edits``, source "edit": an edited copy of it); multipart ``file``
     (JSON / CSV / DCM map) + ``name`` imports one."""
     from starlette.concurrency import run_in_threadpool
 
@@ -65,7 +67,11 @@ async def create_base_map(request: Request, services: ServicesDep) -> BaseMapOut
             raise MalformedRequestError(f"body is not valid JSON: {message}") from None
         raise InvalidRequestError(f"{field or 'body'}: {message}", field=field) from None
     base_map = await run_in_threadpool(
-        services.base_maps.promote, run_id=body.run_id, version_id=body.version_id, name=body.name
+        services.base_maps.promote,
+        run_id=body.run_id,
+        version_id=body.version_id,
+        name=body.name,
+        edited=edited_map(body.values, body.edits, body.source),
     )
     return BaseMapOut.of(base_map)
 

@@ -8,9 +8,18 @@ from typing import Annotated
 from fastapi import APIRouter, File, Form, Query, Response, UploadFile
 
 from app.api.deps import MAX_ID, Id, ServicesDep
-from app.api.schemas import ERRORS, DatasetOut, PageOut, PreviewChannel, PreviewOut, SimulateIn
+from app.api.schemas import (
+    ERRORS,
+    DatasetOut,
+    DatasetSetupOut,
+    PageOut,
+    PreviewChannel,
+    PreviewOut,
+    SimulateIn,
+)
 from app.errors import InvalidRequestError
 from app.io.names import name_schema
+from app.services.scenario_setup import setup_of
 
 router = APIRouter(prefix="/datasets", tags=["datasets"], responses=ERRORS)
 # ``{dataset_id:int}``: only digits match, so ``GET /datasets/simulate`` reaches the POST-only
@@ -83,6 +92,16 @@ def upload_dataset(
             "'channel:NAME'. Default: the raster of the slowest kept channel.",
         ),
     ] = None,
+    rate_hz: Annotated[
+        float | None,
+        Form(
+            gt=0,
+            le=1e7,
+            allow_inf_nan=False,
+            description="Sample rate of the rows in Hz, for a CSV without a time column only "
+            "(row k at k / rate_hz s); such a file is refused (422, field 'time') without it.",
+        ),
+    ] = None,
 ) -> DatasetOut:
     """Upload a log. The whole file is validated before anything is stored. The response
     also carries ingest's ``notes`` and the ``masked`` samples per channel, when there are
@@ -96,6 +115,7 @@ def upload_dataset(
         max_decompressed_bytes=services.settings.max_decompressed_bytes,
         channels=_channels(channels),
         raster=raster,
+        rate_hz=rate_hz,
     )
     return DatasetOut.of(dataset)
 
@@ -141,6 +161,14 @@ def preview_dataset(
         time=doc["time"],
         channels={k: PreviewChannel(**v) for k, v in doc["channels"].items()},
     )
+
+
+@router.get("/{dataset_id:int}/setup", response_model=DatasetSetupOut)
+def dataset_setup(services: ServicesDep, dataset_id: Id) -> DatasetSetupOut:
+    """A simulated dataset's scenario setup per estimator it applies to: the table grid,
+    signals and config a run starts from (the scenario's settings with this realisation's
+    drawn constants); no estimators for an uploaded log."""
+    return DatasetSetupOut(**setup_of(services.db, dataset_id))
 
 
 @router.delete("/{dataset_id:int}", status_code=204, response_class=Response)

@@ -1,5 +1,9 @@
 """The dashboard: ``frontend/index.html`` for every view route, static files under
-``/static/``, Plotly from the installed ``plotly`` package (no CDN, works offline)."""
+``/static/``, Plotly from the installed ``plotly`` package (no CDN, works offline).
+
+Any other ``GET``/``HEAD`` outside ``/api/`` and ``/static/`` also gets the page, whose
+router shows its own "Page not found" view: a person who mistypes an address sees the
+dashboard, not a JSON error. Unknown ``/api/`` paths stay JSON 404s for programs."""
 
 from __future__ import annotations
 
@@ -10,6 +14,8 @@ from pathlib import Path
 
 from fastapi import APIRouter, Request
 from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse, Response
+from fastapi.routing import APIRoute
+from starlette.routing import Match
 from starlette.staticfiles import StaticFiles
 from starlette.types import Scope
 
@@ -60,6 +66,13 @@ class RevalidatingStatic(StaticFiles):
 @router.get("/")
 def root() -> RedirectResponse:
     return RedirectResponse("/datasets", status_code=307)
+
+
+@router.head("/")
+def root_head() -> Response:
+    """``HEAD /`` answers 200 with the dashboard's headers: uptime probes and load
+    balancers ask the root with ``HEAD`` and do not follow redirects."""
+    return _index()
 
 
 def asset_versions(root: Path = FRONTEND_DIR) -> dict[str, str]:
@@ -114,7 +127,7 @@ def _index() -> HTMLResponse:
 
 
 for _route in VIEW_ROUTES:
-    router.add_api_route(_route, _index, methods=["GET"], include_in_schema=False)
+    router.add_api_route(_route, _index, methods=["GET", "HEAD"], include_in_schema=False)
 
 
 @router.get(PLOTLY_URL)
@@ -131,3 +144,34 @@ def static_files() -> RevalidatingStatic | None:
     if not FRONTEND_DIR.is_dir():
         return None
     return RevalidatingStatic(directory=FRONTEND_DIR, check_dir=False)
+
+
+class DashboardFallback(APIRoute):
+    """Matches only ``GET``/``HEAD`` of a path outside ``/api`` and ``/static``; anything
+    else falls through (to a JSON 404, or a 405 from the route it partly matched), so no
+    API answer changes."""
+
+    def matches(self, scope: Scope) -> tuple[Match, Scope]:
+        path = scope.get("path", "")
+        if (
+            scope["type"] != "http"
+            or scope.get("method") not in ("GET", "HEAD")
+            or path in ("/api", "/static")
+            or path.startswith(("/api/", "/static/"))
+        ):
+            return Match.NONE, {}
+        return super().matches(scope)
+
+
+def _fallback(path: str) -> HTMLResponse:
+    return _index()
+
+
+# Last in this router; the app includes the router after every API router.
+router.add_api_route(
+    "/{path:path}",
+    _fallback,
+    methods=["GET", "HEAD"],
+    include_in_schema=False,
+    route_class_override=DashboardFallback,
+)

@@ -1,4 +1,5 @@
-"""Runs: create, list, get, cancel, resume; versions, series, cells, export, compare."""
+"""Runs: create, list, get, rename, delete, clone, cancel, resume; versions, series, cells,
+export, compare."""
 
 from __future__ import annotations
 
@@ -16,17 +17,23 @@ from app.api.schemas import (
     CompareOut,
     LabelIn,
     PageOut,
+    RunGroupRefOut,
     RunOut,
+    RunRenameIn,
     SeriesLine,
     SeriesOut,
     VersionOut,
     VersionSummaryOut,
 )
+from app.api.schemas_truth import TruthMapOut
 from app.domain import RunStatus
 from app.errors import InvalidRequestError
 from app.io.decimate import finite_or_none, nested_or_none
 from app.runs.options import MAX_VERSIONS
+from app.services.run_clone import CloneRequest
 from app.services.run_plan import RunRequest
+from app.services.runs import GroupRef
+from app.services.truth_map import truth_on_grid
 
 router = APIRouter(tags=["runs"], responses=ERRORS)
 
@@ -48,10 +55,36 @@ def list_runs(
     offset: Offset = 0,
     dataset_id: Annotated[int | None, Query(ge=1, le=MAX_ID)] = None,
     status: RunStatus | None = None,
+    q: Annotated[
+        str | None, Query(max_length=200, description="The name contains it (any case).")
+    ] = None,
+    estimator: Annotated[str | None, Query(max_length=64)] = None,
+    group: Annotated[
+        int | None, Query(ge=1, le=MAX_ID, description="Only the runs of this sweep or batch.")
+    ] = None,
+    top_level: Annotated[
+        bool,
+        Query(
+            description="Runs outside any sweep or batch, and each sweep or batch once, as its "
+            "first run matching the filters (its ``group`` names it)."
+        ),
+    ] = False,
 ) -> PageOut:
-    page = services.runs.list(limit=limit, offset=offset, dataset_id=dataset_id, status=status)
+    """Runs newest first, paged; every filter narrows the list. Each run's ``group`` names
+    the sweep or batch it belongs to."""
+    page = services.runs.list(
+        limit=limit,
+        offset=offset,
+        dataset_id=dataset_id,
+        status=status,
+        q=q,
+        estimator=estimator,
+        group_id=group,
+        top_level=top_level,
+    )
+    refs = services.runs.groups_of(page.items)
     return PageOut[RunOut](
-        items=[RunOut.of(r) for r in page.items],
+        items=[RunOut.of(r, _group_out(refs.get(r.group_id or 0))) for r in page.items],
         total=page.total,
         limit=page.limit,
         offset=page.offset,
@@ -61,6 +94,29 @@ def list_runs(
 @router.get("/runs/{run_id}", response_model=RunOut)
 def get_run(services: ServicesDep, run_id: Id) -> RunOut:
     return RunOut.of(services.runs.get(run_id))
+
+
+@router.patch("/runs/{run_id}", response_model=RunOut)
+def rename_run(services: ServicesDep, run_id: Id, body: RunRenameIn) -> RunOut:
+    """Rename the run (1 to 200 characters, no control characters)."""
+    return RunOut.of(services.runs.rename(run_id, body.name))
+
+
+@router.delete("/runs/{run_id}", status_code=204, response_class=Response)
+def delete_run(services: ServicesDep, run_id: Id) -> Response:
+    """Delete the run with its map versions, metrics and series. A queued or running run is
+    refused (409 naming its status): cancel it first. Base maps promoted from it stay, their
+    lineage naming the run; a sweep's or batch's run may go (the group counts what remains)."""
+    services.runs.delete(run_id)
+    return Response(status_code=204)
+
+
+@router.post("/runs/{run_id}/clone", status_code=201, response_model=RunOut)
+def clone_run(services: ServicesDep, run_id: Id, body: CloneRequest | None = None) -> RunOut:
+    """Queue a new run with the run's dataset, estimator, signals, table and config, named
+    "<name> (copy)"; the optional body overrides ``name`` and merges into ``config``, and the
+    copy is validated exactly as ``POST /api/runs``. A sweep's run is cloned on its own."""
+    return RunOut.of(services.runs.clone(run_id, body))
 
 
 @router.post("/runs/{run_id}/cancel", response_model=RunOut)
@@ -95,7 +151,15 @@ def list_versions(
 
 @router.get("/runs/{run_id}/versions/{version_id}", response_model=VersionOut)
 def get_version(services: ServicesDep, run_id: Id, version_id: Id) -> VersionOut:
+    """One version by its database ``id`` (see ``by-number`` for its number in the run)."""
     return VersionOut.of_version(services.runs.version(run_id, version_id))
+
+
+@router.get("/runs/{run_id}/versions/by-number/{number}", response_model=VersionOut)
+def get_version_by_number(services: ServicesDep, run_id: Id, number: Id) -> VersionOut:
+    """Version ``number`` of the run: its place 1…n by step, as the dashboard's URLs
+    (``?version=N``), export headers and base-map names give it; 404 naming the number."""
+    return VersionOut.of_version(services.runs.version_by_number(run_id, number))
 
 
 @router.patch("/runs/{run_id}/versions/{version_id}", response_model=VersionSummaryOut)
@@ -111,7 +175,8 @@ def get_series(
     run_id: Id,
     points: Annotated[int, Query(ge=2, le=100_000)] = 2000,
 ) -> SeriesOut:
-    """The run's result series on a shared time base (stored at the end of the run)."""
+    """The run's result series on a shared time base (stored at the end of the run), at most
+    ``points`` samples: each bucket's minimum and maximum, so one-sample spikes survive."""
     time, lines = services.runs.series(run_id, points=points)
     return SeriesOut(
         time=finite_or_none(time),
@@ -135,6 +200,12 @@ def get_cells(services: ServicesDep, run_id: Id) -> CellsOut:
     )
 
 
+@router.get("/runs/{run_id}/truth-map", response_model=TruthMapOut)
+def get_truth_map(services: ServicesDep, run_id: Id) -> TruthMapOut:
+    """A simulated dataset's true map on the run's grid (404 when the dataset has none)."""
+    return TruthMapOut.of(truth_on_grid(services.db, run_id))
+
+
 @router.get(
     "/runs/{run_id}/export",
     response_class=Response,
@@ -155,20 +226,32 @@ def export_run(
     services: ServicesDep,
     run_id: Id,
     format: Annotated[Literal["json", "csv", "mcap", "dcm", "cdfx", "image"], Query()] = "json",
-    version: Annotated[int | None, Query(ge=1, le=MAX_ID)] = None,
+    version: Annotated[
+        int | None, Query(ge=1, le=MAX_ID, description="The version's database id.")
+    ] = None,
     part: Literal["map", "series"] | None = None,
+    number: Annotated[
+        int | None,
+        Query(
+            ge=1, le=MAX_ID, description="The version's number 1…n in the run (not with version)."
+        ),
+    ] = None,
 ) -> Response:
     """Download: ``json`` (the ``mapwise adapt`` map document), ``csv`` (map grid, or
     ``part=series`` the time series), ``mcap`` (series + map versions), ``dcm``; a run
     linked to an A2L map also ``cdfx`` and ``image`` (the ECU's patched HEX/S19), its DCM
-    and CDFX keyed by the A2L name with values as the ECU stores them."""
+    and CDFX keyed by the A2L name with values as the ECU stores them. A map file is named
+    ``run<R>-<estimator>-v<N>…`` and a DCM's header says "run R …, version N", N the version's
+    number in the run."""
     if part == "series" and format in ("json", "dcm", "cdfx", "image"):
         raise InvalidRequestError(
             f"part=series is exported as CSV (format=csv) or MCAP; format={format} exports the "
             "map only",
             field="part",
         )
-    download = services.runs.export(run_id, fmt=format, version_id=version, part=part)
+    download = services.runs.export(
+        run_id, fmt=format, version_id=version, part=part, number=number
+    )
     return Response(
         download.content,
         media_type=download.media_type,
@@ -213,6 +296,12 @@ def compare_runs(
         final = None if version is None else VersionOut.of_version(version)
         items.append(CompareItem(**doc, final_version=final))
     return CompareOut(runs=items)
+
+
+def _group_out(ref: GroupRef | None) -> RunGroupRefOut | None:
+    if ref is None:
+        return None
+    return RunGroupRefOut(id=ref.id, kind=ref.kind, name=ref.name, size=ref.size)  # type: ignore[arg-type]
 
 
 def content_disposition(filename: str) -> str:

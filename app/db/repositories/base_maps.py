@@ -9,7 +9,7 @@ from sqlalchemy import func, select
 from sqlalchemy.orm import Session, undefer
 
 from app.db import blobs
-from app.db.models import BaseMapRow
+from app.db.models import BaseMapRow, MapVersionRow
 from app.db.repositories.base import from_row
 from app.domain import BaseMap, Page
 from app.errors import NotFoundError
@@ -19,13 +19,35 @@ class BaseMapRepo:
     def __init__(self, session: Session) -> None:
         self.s = session
 
-    @staticmethod
-    def _map(row: BaseMapRow) -> BaseMap:
+    def _map(self, row: BaseMapRow) -> BaseMap:
         values = blobs.unpack_array(row.values)
         assert values is not None
         return from_row(
-            BaseMap, row, axes=list(row.axes), values=values, metrics=dict(row.metrics or {})
+            BaseMap,
+            row,
+            axes=list(row.axes),
+            values=values,
+            metrics=dict(row.metrics or {}),
+            version_number=self._version_number(row),
         )
+
+    def _version_number(self, row: BaseMapRow) -> int | None:
+        """The promoted version's number in its run (its rank by step, as
+        :meth:`VersionRepo._number`); ``None`` once the version is gone (the lineage keeps
+        the ids, the number needs the run's versions)."""
+        if row.run_id is None or row.version_id is None:
+            return None
+        step = (
+            select(MapVersionRow.step)
+            .where(MapVersionRow.id == row.version_id, MapVersionRow.run_id == row.run_id)
+            .scalar_subquery()
+        )
+        q = (
+            select(func.count())
+            .select_from(MapVersionRow)
+            .where(MapVersionRow.run_id == row.run_id, MapVersionRow.step <= step)
+        )
+        return int(self.s.scalar(q) or 0) or None
 
     def add(
         self,

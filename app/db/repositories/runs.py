@@ -7,11 +7,11 @@ from collections.abc import Collection, Mapping
 from datetime import datetime
 from typing import Any
 
-from sqlalchemy import func, select, update
+from sqlalchemy import delete, func, or_, select, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
-from app.db.models import MapVersionRow, RunMetricRow, RunRow, utcnow
+from app.db.models import MapVersionRow, RunGroupRow, RunMetricRow, RunRow, utcnow
 from app.db.repositories.base import from_row, valid_id
 from app.domain import Page, Run, RunStatus
 from app.errors import ConflictError, NotFoundError, SupersededError
@@ -96,12 +96,33 @@ class RunRepo:
         offset: int,
         dataset_id: int | None = None,
         status: str | None = None,
+        q: str | None = None,
+        estimator: str | None = None,
+        group_id: int | None = None,
+        top_level: bool = False,
     ) -> Page[Run]:
-        where = []
+        """Runs newest first, filtered. ``q``: the name contains it (case-insensitive);
+        ``group_id``: the runs of that sweep or batch. ``top_level``: the runs outside any
+        group, and each group once, as its first run matching the other filters (so a list
+        pages over ungrouped runs and groups together, a group placed by its first run)."""
+        where: list[Any] = []
         if dataset_id is not None:
             where.append(RunRow.dataset_id == dataset_id)
         if status is not None:
             where.append(RunRow.status == status)
+        if q:
+            where.append(func.lower(RunRow.name).contains(q.lower(), autoescape=True))
+        if estimator is not None:
+            where.append(RunRow.estimator == estimator)
+        if group_id is not None:
+            where.append(RunRow.group_id == group_id)
+        if top_level:
+            firsts = (
+                select(func.min(RunRow.id))
+                .where(RunRow.group_id.is_not(None), *where)
+                .group_by(RunRow.group_id)
+            )
+            where.append(or_(RunRow.group_id.is_(None), RunRow.id.in_(firsts)))
         total = self.s.scalar(select(func.count()).select_from(RunRow).where(*where)) or 0
         rows = list(
             self.s.scalars(
@@ -111,6 +132,54 @@ class RunRepo:
         ids = [r.id for r in rows]
         metrics, counts = self._metrics(ids), self._n_versions(ids)
         return Page([self._run(r, metrics[r.id], counts[r.id]) for r in rows], total, limit, offset)
+
+    def rename(self, run_id: int, name: str) -> Run:
+        self._row(run_id).name = name
+        self.s.flush()
+        return self.get(run_id)
+
+    def delete(self, run_id: int, *, unless: tuple[str, ...]) -> int:
+        """Delete the run with its versions and metrics; return how many versions went.
+        The row is locked first (PostgreSQL), so an executor cannot claim it meanwhile;
+        :class:`ConflictError` naming the status when the run is in one of ``unless``."""
+        row = (
+            self.s.scalars(select(RunRow).where(RunRow.id == run_id).with_for_update()).first()
+            if valid_id(run_id)
+            else None
+        )
+        if row is None:
+            raise NotFoundError(f"run {run_id} does not exist", field="run_id")
+        if row.status in unless:
+            raise ConflictError(
+                f"run {run_id} is {row.status}; cancel it first (POST /api/runs/{run_id}/cancel), "
+                "then delete it",
+                field="run_id",
+            )
+        n_versions = self._n_versions([run_id])[run_id]
+        self.s.execute(delete(RunMetricRow).where(RunMetricRow.run_id == run_id))
+        self.s.execute(delete(MapVersionRow).where(MapVersionRow.run_id == run_id))
+        self.s.execute(delete(RunRow).where(RunRow.id == run_id))
+        return n_versions
+
+    def group_refs(self, group_ids: Collection[int]) -> dict[int, tuple[str, str]]:
+        """``{group id: (kind, name)}`` of the given sweeps and batches."""
+        if not group_ids:
+            return {}
+        q = select(RunGroupRow.id, RunGroupRow.kind, RunGroupRow.name).where(
+            RunGroupRow.id.in_(list(group_ids))
+        )
+        return {gid: (kind, name) for gid, kind, name in self.s.execute(q)}
+
+    def group_sizes(self, group_ids: Collection[int]) -> dict[int, int]:
+        """``{group id: number of runs}`` (all of them, whatever a list filtered)."""
+        if not group_ids:
+            return {}
+        q = (
+            select(RunRow.group_id, func.count())
+            .where(RunRow.group_id.in_(list(group_ids)))
+            .group_by(RunRow.group_id)
+        )
+        return {int(gid): int(n) for gid, n in self.s.execute(q)}
 
     def in_group(self, group_id: int) -> list[Run]:
         """The group's runs in creation order, with their final metrics."""

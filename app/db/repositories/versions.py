@@ -17,8 +17,8 @@ from app.domain import MapVersion, Page, ResumePoint, VersionSummary
 from app.errors import NotFoundError
 
 
-def _summary(row: MapVersionRow) -> VersionSummary:
-    return from_row(VersionSummary, row)
+def _summary(row: MapVersionRow, number: int) -> VersionSummary:
+    return from_row(VersionSummary, row, number=number)
 
 
 def _unpack_dict(blob: bytes | None) -> dict[str, np.ndarray]:
@@ -63,7 +63,17 @@ class VersionRepo:
         )
         self.s.add(row)
         self.s.flush()
-        return _summary(row)
+        return _summary(row, self._number(row))
+
+    def _number(self, row: MapVersionRow) -> int:
+        """The row's place 1…n in its run: the versions at or before its step (steps are
+        unique per run, ``uq_map_versions_run_step``)."""
+        q = (
+            select(func.count())
+            .select_from(MapVersionRow)
+            .where(MapVersionRow.run_id == row.run_id, MapVersionRow.step <= row.step)
+        )
+        return int(self.s.scalar(q) or 0)
 
     def list(self, run_id: int, *, limit: int, offset: int) -> Page[VersionSummary]:
         where = MapVersionRow.run_id == run_id
@@ -75,9 +85,14 @@ class VersionRepo:
             .limit(limit)
             .offset(offset)
         )
-        return Page([_summary(r) for r in self.s.scalars(q)], total, limit, offset)
+        rows = self.s.scalars(q)
+        return Page([_summary(r, offset + k + 1) for k, r in enumerate(rows)], total, limit, offset)
 
-    def _full(self, where: Any, order: Any = None) -> MapVersion | None:
+    def _full(
+        self, where: Any, order: Any = None, *, offset: int = 0, number: int | None = None
+    ) -> MapVersion | None:
+        """The first row matching ``where`` (in ``order``, after ``offset``) with its arrays;
+        ``number``: its place in the run when the caller knows it (else counted)."""
         q = (
             select(MapVersionRow)
             .options(
@@ -89,12 +104,12 @@ class VersionRepo:
             .where(*where)
         )
         if order is not None:
-            q = q.order_by(order).limit(1)
+            q = q.order_by(order).offset(offset).limit(1)
         row = self.s.scalars(q).first()
         if row is None:
             return None
         return MapVersion(
-            summary=_summary(row),
+            summary=_summary(row, self._number(row) if number is None else number),
             axes=row.axes,
             values=blobs.unpack_array(row.values),
             variances=blobs.unpack_array(row.variances),
@@ -106,8 +121,38 @@ class VersionRepo:
     def get(self, run_id: int, version_id: int) -> MapVersion:
         found = self._full([MapVersionRow.run_id == run_id, MapVersionRow.id == version_id])
         if found is None:
-            raise NotFoundError(f"run {run_id} has no version {version_id}", field="version_id")
+            raise NotFoundError(
+                f"run {run_id} has no version with id {version_id}", field="version_id"
+            )
         return found
+
+    def by_number(self, run_id: int, number: int) -> MapVersion:
+        """Version ``number`` (1…n by step) of the run; 404 naming the number and how many
+        the run has."""
+        found = (
+            self._full(
+                [MapVersionRow.run_id == run_id],
+                order=MapVersionRow.step,
+                offset=number - 1,
+                number=number,
+            )
+            if number >= 1
+            else None
+        )
+        if found is None:
+            raise NotFoundError(
+                f"run {run_id} has no version {number} ({self._count_text(run_id)})",
+                field="number",
+            )
+        return found
+
+    def count(self, run_id: int) -> int:
+        where = MapVersionRow.run_id == run_id
+        return int(self.s.scalar(select(func.count()).select_from(MapVersionRow).where(where)) or 0)
+
+    def _count_text(self, run_id: int) -> str:
+        n = self.count(run_id)
+        return "it has none yet" if n == 0 else f"it has 1…{n}" if n > 1 else "it has 1"
 
     def latest(self, run_id: int) -> MapVersion | None:
         """The final version, else the last one persisted."""
@@ -119,10 +164,12 @@ class VersionRepo:
     def set_label(self, run_id: int, version_id: int, label: str | None) -> VersionSummary:
         row = self.s.get(MapVersionRow, version_id)
         if row is None or row.run_id != run_id:
-            raise NotFoundError(f"run {run_id} has no version {version_id}", field="version_id")
+            raise NotFoundError(
+                f"run {run_id} has no version with id {version_id}", field="version_id"
+            )
         row.label = label
         self.s.flush()
-        return _summary(row)
+        return _summary(row, self._number(row))
 
     def resume_point(self, run_id: int) -> ResumePoint | None:
         """The last version with a state, plus every earlier version's output segment."""
@@ -168,7 +215,11 @@ class VersionRepo:
         """Every version with its arrays, in order."""
         q = select(MapVersionRow.id).where(MapVersionRow.run_id == run_id)
         ids = list(self.s.scalars(q.order_by(MapVersionRow.step)))
-        return [self.get(run_id, i) for i in ids]
+        where = [MapVersionRow.run_id == run_id]
+        found = [
+            self._full([*where, MapVersionRow.id == i], number=k + 1) for k, i in enumerate(ids)
+        ]
+        return [v for v in found if v is not None]
 
     def has_step(self, run_id: int, step: int) -> bool:
         q = select(MapVersionRow.id).where(

@@ -423,6 +423,7 @@ def test_openapi_documents_every_route(client: TestClient) -> None:
         "/api/runs/{run_id}/cancel",
         "/api/runs/{run_id}/resume",
         "/api/runs/{run_id}/versions/{version_id}",
+        "/api/runs/{run_id}/versions/by-number/{number}",
         "/api/runs/{run_id}/series",
         "/api/runs/{run_id}/cells",
         "/api/runs/{run_id}/export",

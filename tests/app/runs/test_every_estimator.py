@@ -1,9 +1,9 @@
 """Every registered estimator runs to ``succeeded`` through the REST API, as the dashboard
-starts it: a dataset simulated from a scenario the estimator applies to, the scenario's
-default config, and every signal role mapped to its default column (on SQLite and
-PostgreSQL). Its stored series each carry a role, and their keys are unique even where an
-estimate has the name of an input channel (the EKF's ``p_im_pa``, once a UNIQUE violation
-when the run stored its results)."""
+starts it: a dataset simulated from a scenario the estimator applies to, the catalog's
+defaults overridden by the dataset's scenario setup (``GET /api/datasets/{id}/setup``: the
+scenario's grid, signals and settings), on SQLite and PostgreSQL. Its stored series each
+carry a role, and their keys are unique even where an estimate has the name of an input
+channel (the EKF's ``p_im_pa``, once a UNIQUE violation when the run stored its results)."""
 
 from __future__ import annotations
 
@@ -20,7 +20,6 @@ from tests.support.helpers import start_run, wait_run
 # Long enough for every estimator's results (the torque metrics start 5 s in), short
 # enough for a quick test; None: the whole (short) scenario.
 DURATION_S = {"skf-sim1": None, "maf-whtc": 120.0, "maf-1d-whtc": 120.0, "torque-si": 6.0}
-MAP_FILTER_KEYS = ("axes", "output", "output_unit")
 
 
 def _scenario_for(estimator: str) -> Scenario:
@@ -32,30 +31,43 @@ def _scenario_for(estimator: str) -> Scenario:
 
 
 def _request(client: TestClient, estimator: str, scenario: Scenario) -> dict[str, Any]:
-    """The run request the dashboard sends: table and output from the scenario's config,
-    the other roles mapped to their default columns where the dataset has them."""
-    simulate = {"scenario": scenario.name, "seed": 0}
-    if DURATION_S.get(scenario.name) is not None:
-        simulate["duration_s"] = DURATION_S[scenario.name]
-    response = client.post("/api/datasets/simulate", json=simulate)
-    assert response.status_code == 201, response.text
-    dataset = response.json()
-    columns = {c["name"] for c in dataset["channels"]}
+    """The run request the dashboard sends with "Use the scenario's setup" on: the catalog's
+    defaults overridden by ``GET /api/datasets/{id}/setup`` (the scenario's grid, signals and
+    settings with this realisation's drawn constants)."""
+    dataset = _simulated(client, scenario)
+    response = client.get(f"/api/datasets/{dataset['id']}/setup")
+    assert response.status_code == 200, response.text
+    doc = response.json()
+    assert doc["scenario"] == scenario.name
+    assert estimator in doc["estimators"], sorted(doc["estimators"])
+    setup = doc["estimators"][estimator]
     entry = next(e for e in client.get("/api/estimators").json()["items"] if e["name"] == estimator)
-    config = scenario.default_config(estimator)
-    body: dict[str, Any] = {"dataset_id": dataset["id"], "estimator": estimator, "signals": {}}
-    if entry["kind"] == "table-filter":
-        body["table"] = {
-            "axes": [{"name": a["name"], "breakpoints": a["breakpoints"]} for a in config["axes"]]
-        }
-        body["signals"] = {"y": config["output"]}
-        config = {k: v for k, v in config.items() if k not in MAP_FILTER_KEYS}
-    else:
-        body["signals"] = {
-            r["role"]: r["default"] for r in entry["signals"] if r["default"] in columns
-        }
-    body["config"] = config
+    assert (setup["table"] is not None) == entry["needs_table"], setup
+    body: dict[str, Any] = {
+        "dataset_id": dataset["id"],
+        "estimator": estimator,
+        "signals": setup["signals"],
+        "config": entry["defaults"] | setup["config"],
+    }
+    if setup["table"] is not None:
+        body["table"] = setup["table"]
     return body
+
+
+_SIMULATED: dict[tuple[int, str], dict[str, Any]] = {}
+
+
+def _simulated(client: TestClient, scenario: Scenario) -> dict[str, Any]:
+    """One dataset per scenario and test module (shared by the estimators of a family)."""
+    key = (id(client), scenario.name)
+    if key not in _SIMULATED:
+        simulate: dict[str, Any] = {"scenario": scenario.name, "seed": 0}
+        if DURATION_S.get(scenario.name) is not None:
+            simulate["duration_s"] = DURATION_S[scenario.name]
+        response = client.post("/api/datasets/simulate", json=simulate)
+        assert response.status_code == 201, response.text
+        _SIMULATED[key] = response.json()
+    return _SIMULATED[key]
 
 
 @pytest.mark.parametrize("estimator", names())
@@ -64,6 +76,9 @@ def test_every_estimator_succeeds_through_the_api(client: TestClient, estimator:
     body = _request(client, estimator, scenario)
     done = wait_run(client, start_run(client, body)["id"], timeout=300)
     assert done["status"] == "succeeded", f"{estimator} on {scenario.name}: {done['error']}"
+    if done["produces_map"] and estimator != "ekf-def":
+        # On the scenario's own grid the run is scored against the known truth.
+        assert {"map_rmse", "rmse"} & set(done["metrics"]), done["metrics"]
 
     series = client.get(f"/api/runs/{done['id']}/series", params={"points": 50}).json()
     lines = series["series"]
@@ -80,6 +95,16 @@ def test_every_estimator_succeeds_through_the_api(client: TestClient, estimator:
 
     frame_kinds = _stream_kinds(client, done["id"])
     assert frame_kinds[:2] == ["full", "status"]
+
+
+def test_an_uploaded_log_has_no_scenario_setup(client: TestClient, example_csv) -> None:  # type: ignore[no-untyped-def]
+    with example_csv.open("rb") as f:
+        response = client.post("/api/datasets", files={"file": ("example.csv", f, "text/csv")})
+    assert response.status_code == 201, response.text
+    doc = client.get(f"/api/datasets/{response.json()['id']}/setup").json()
+    assert doc["scenario"] is None
+    assert doc["estimators"] == {}
+    assert client.get("/api/datasets/999999/setup").status_code == 404
 
 
 def test_an_estimate_named_like_an_input_keeps_both(client: TestClient) -> None:

@@ -10,7 +10,7 @@ import numpy as np
 
 from app.domain import Series, SeriesRole
 from app.runs.hub import LiveHub
-from app.runs.live import LIVE_CELLS_PER_S, LiveTicks
+from app.runs.live import LIVE_CELLS_PER_S, LIVE_POINTS_PER_TICK, LiveTicks
 from estimation.estimator import Snapshot
 from estimation.signals import Signals
 from estimation.table import Axis, Table
@@ -138,3 +138,20 @@ def test_small_map_rides_on_every_tick() -> None:
         live.tick(_snap(sample, Table(axes, 1.0)), results)  # type: ignore[arg-type]
     assert len(sent) > 90
     assert all(m["values"] is not None for m in sent)
+
+
+def test_a_tick_keeps_a_one_sample_spike_of_its_window() -> None:
+    """A tick covering more samples than it carries keeps each bucket's extremes: a spike
+    of one sample shows on the live plot while the run goes, not only once it is stored."""
+    axes = [Axis("u1", "", np.linspace(0, 1, 5)), Axis("u2", "", np.linspace(0, 1, 5))]
+    results = FakeResults()
+    results.visits = np.zeros((5, 5))
+    results.residual = np.zeros(SAMPLES)
+    results.residual[1234] = 64.7
+    sent: list[dict[str, Any]] = []
+    live = LiveTicks(3, live_fps=20.0, publish=sent.append, clock=Clock())
+    live.tick(_snap(SAMPLES, Table(axes, 1.0)), results, force=True)  # type: ignore[arg-type]
+    line = sent[-1]["series"]["residual"]
+    assert len(line["values"]) <= LIVE_POINTS_PER_TICK < SAMPLES
+    assert max(line["values"]) == 64.7
+    assert line["time"] == sorted(line["time"])
