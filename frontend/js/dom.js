@@ -156,7 +156,7 @@ export function metricLabel(key) {
     mean_relative_error: "Mean rel. error",
     coverage: "Coverage",
     ise: "ISE",
-    mae: "MAE",
+    mae: "Max |e|", // TQ (61): the torque paper's "MAE" is max |τ − τ̂|
     sd: "SD",
     samples_per_s: "Samples/s",
     estimate_s: "Compute time",

@@ -1,7 +1,8 @@
 /**
  * The "Export" menu button of a run: one item per format, keyboard operable (menu pattern).
  * A run adapted from an ECU map (its `calibration` link) also exports CDFX and the ECU's
- * memory image with the map patched in (docs/calibration.md#dashboard).
+ * memory image with the map patched in (docs/calibration.md#dashboard). A run without a map
+ * (a torque observer) offers only what it has: its time series as CSV and MCAP.
  */
 import { api, showError } from "./api.js";
 import { EXPORT_FORMATS, SEL } from "./constants.js";
@@ -13,14 +14,30 @@ export const CALIBRATION_FORMATS = Object.freeze([
   { value: "image", label: "Patched ECU image (HEX/S19)", ext: "hex" },
 ]);
 
+/** The formats of a run's time series (the server's `part=series`), for runs without a map. */
+export const SERIES_FORMATS = Object.freeze([
+  { value: "csv", label: "CSV time series", ext: "csv" },
+  { value: "mcap", label: "MCAP (Foxglove)", ext: "mcap" },
+]);
+
+/** The formats a run can export: map formats only if it makes a map. */
+export function formatsFor({ producesMap = true, calibration = null } = {}) {
+  if (!producesMap) return SERIES_FORMATS;
+  return calibration ? [...EXPORT_FORMATS, ...CALIBRATION_FORMATS] : EXPORT_FORMATS;
+}
+
 /**
  * @param {number} runId
  * @param {{versionId: () => number|null, errorHost: HTMLElement, signal: AbortSignal,
- *   calibration?: {ecu_id: number, map: string}|null}} opts
- *   versionId: the version to export (null: the run's final map); calibration: the run's link
+ *   calibration?: {ecu_id: number, map: string}|null, producesMap?: boolean}} opts
+ *   versionId: the version to export (null: the run's final map); calibration: the run's link;
+ *   producesMap: false for a run with no map (only its series export)
  */
-export function exportMenu(runId, { versionId, errorHost, signal, calibration = null }) {
-  const formats = calibration ? [...EXPORT_FORMATS, ...CALIBRATION_FORMATS] : EXPORT_FORMATS;
+export function exportMenu(
+  runId,
+  { versionId, errorHost, signal, calibration = null, producesMap = true },
+) {
+  const formats = formatsFor({ producesMap, calibration });
   const list = h(
     "div",
     { class: "menu-list", role: "menu", hidden: true },
@@ -34,11 +51,13 @@ export function exportMenu(runId, { versionId, errorHost, signal, calibration = 
           "data-export": f.value,
           onclick: async () => {
             close();
-            const vid = versionId();
+            const vid = producesMap ? versionId() : null;
             try {
               await api.download(
                 `/api/runs/${runId}/export`,
-                { format: f.value, version: vid ?? undefined },
+                producesMap
+                  ? { format: f.value, version: vid ?? undefined }
+                  : { format: f.value, part: f.value === "csv" ? "series" : undefined },
                 `run-${runId}.${f.ext ?? f.value}`,
               );
             } catch (err) {

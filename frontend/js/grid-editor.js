@@ -571,7 +571,7 @@ export function gridEditor({
     baseInfo.textContent =
       `${map.axes?.map((a) => `${a.name} (${a.breakpoints.length})`).join(" × ") ?? ""}` +
       (lin?.run_id
-        ? ` · from run #${lin.run_id}, version ${lin.version_id} (${lin.estimator})`
+        ? ` · from run #${lin.run_id}, ${lin.version_number ? `v${lin.version_number}` : `version id ${lin.version_id}`} (${lin.estimator})`
         : "");
   }
 

@@ -99,6 +99,8 @@ export class MapPlot {
     this.slices = slices;
     slices?.plots.add(this);
     this.slice = { key: "", axes: [], index: [], inputs: [], labels: [], host: null };
+    /** Marks over a heatmap's cells: (frame2d, x, y) => {traces?, shapes?} (trust-maps.js). */
+    this.overlay = null;
   }
 
   /** Pin the colour range (e.g. shared by several maps, or fixed per run); null returns to widen-only. */
@@ -239,6 +241,7 @@ export class MapPlot {
       variances: cut(frame.variances),
       visits: cut(frame.visits),
       weights: cut(frame.weights),
+      cellState: cut(frame.cellState),
       activeCell: inSlice(cell) ? cell.slice(0, 2) : null,
       outlines: frame.outlines?.filter(inSlice).map((c) => c.slice(0, 2)),
       sliceText: this.slice.axes
@@ -259,12 +262,7 @@ export class MapPlot {
       scale: this.scale(),
       range: this.range,
       log: this.kind === "variance",
-      title:
-        this.kind === "variance" || this.kind === "visits"
-          ? this.kind
-          : this.kind === "deviation"
-            ? "z"
-            : this.unit,
+      title: this.barTitle(),
       top: size?.t ?? 8,
       height: size?.h ?? null,
       clipped: {
@@ -272,6 +270,16 @@ export class MapPlot {
         hi: this.range !== null && hi > this.range[1],
       },
     });
+  }
+
+  /** What the colour scale measures, with its unit (the output's, squared for variances). */
+  barTitle() {
+    const u = this.unit || "-";
+    if (this.kind === "variance") return `variance [${squared(u)}]`;
+    if (this.kind === "visits") return "hits [samples]";
+    if (this.kind === "deviation") return "z [σ]";
+    // Value and difference maps: "name [unit]" where the view names the quantity (barLabel).
+    return this.barLabel ? `${this.barLabel} [${u}]` : this.unit;
   }
 
   /** The colour range for values z: fixed, symmetric (diverging kinds), seeded or widened. */
@@ -301,7 +309,7 @@ export class MapPlot {
       xpad: 6,
       tickfont: { size: 11, color: t.text3 },
       title: {
-        text: this.kind === "variance" ? "variance" : this.unit || "",
+        text: this.barTitle(),
         side: "right",
         font: { size: 11.5, color: t.text2 },
       },
@@ -327,8 +335,17 @@ export class MapPlot {
     if (this.kind === "deviation") {
       return `${head}<br><b>z = %{customdata[0]}</b><br>weight in the merge = %{customdata[1]}<extra></extra>`;
     }
-    const name = this.kind === "diff" ? `Δ ${this.label}` : this.label;
-    return `${head}<br><b>${name} = %{customdata[0]} ${this.unit}</b><br>variance = %{customdata[1]}<br>visits = %{customdata[2]}<extra></extra>`;
+    const name = this.kind === "diff" ? (this.hoverName ?? `Δ ${this.label}`) : this.label;
+    const u = this.unit || "-";
+    const value = `${name} = %{customdata[0]} ${u}`;
+    const lines =
+      this.kind === "visits"
+        ? [`<b>hits = %{customdata[2]} samples</b>`, value]
+        : [`<b>${value}</b>`, `visits = %{customdata[2]} samples`];
+    // Observers without a covariance (LPV) have no variance to show.
+    if (this.last?.weights) lines.push("weight in the merge = %{customdata[1]}");
+    else if (this.last?.variances) lines.push(`variance = %{customdata[1]} ${squared(u)}`);
+    return `${head}<br>${lines.join("<br>")}%{customdata[3]}<extra></extra>`;
   }
 
   heatmap(frame, z) {
@@ -353,6 +370,8 @@ export class MapPlot {
         ygap: this.gaps && x.length * y.length <= 400 ? 1 : 0,
       },
     ];
+    const over = this.overlay?.(frame, x, y) ?? {};
+    if (over.traces) data.push(...over.traces);
     const trail = frame.trail;
     if (trail?.x?.length) {
       data.push(
@@ -431,6 +450,7 @@ export class MapPlot {
       }),
       margin: { l: 62, r: 8, t: 10, b: 46 },
       font: { family: t.font, size: 12, color: t.text2 },
+      ...(over.shapes ? { shapes: over.shapes } : {}),
     });
     return [data, layout];
   }
@@ -615,10 +635,29 @@ function cellText(frame) {
     const v = pick(values);
     const p = pick(variances);
     const n = pick(visits);
-    return [quick(v, 4), quick(p, 3), n === null || n === undefined ? "–" : String(Math.round(n))];
+    const state = STATE_TEXT[pick(frame.cellState) ?? 0] ?? "";
+    return [
+      quick(v, 4),
+      quick(p, 3),
+      n === null || n === undefined ? "–" : String(Number(n.toPrecision(4))),
+      state,
+    ];
   };
   if (!Array.isArray(values[0])) return values.map((_, i) => cell(i));
   return values[0].map((_, j) => values.map((__, i) => cell(i, j)));
+}
+
+/** Hover line per cell state (frame.cellState, see views/run/trust-maps.js): 0 learned. */
+const STATE_TEXT = [
+  "",
+  "<br><i>unvisited: not learned from data</i>",
+  "<br><i>filled: changed without samples of its own</i>",
+];
+
+/** A unit squared: "ppm²", "(kg/s)²"; "-" stays "-". */
+export function squared(unit) {
+  if (!unit || unit === "-") return "-";
+  return /[/·*\s]/.test(unit) ? `(${unit})²` : `${unit}²`;
 }
 
 /** Hover numbers, built for every cell of every frame: toPrecision, not the slow Intl path. */

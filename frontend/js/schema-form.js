@@ -17,6 +17,8 @@ import { h, parseNumberList, withUnit } from "./dom.js";
  * @param {{name, unit}[]} [opts.channels] dataset channels, offered for *_channel properties
  * @param {string} [opts.prefix]    name prefix, default "config"
  * @param {string} [opts.idPrefix]  unique id prefix when several forms share a page
+ * @param {string} [opts.valuesSource] where opts.values come from (shown as each such field's
+ *   source instead of the schema's, e.g. "scenario nox-sdmp" or "run #12")
  */
 export function schemaForm(
   schema,
@@ -27,6 +29,7 @@ export function schemaForm(
     channels = [],
     prefix = "config",
     idPrefix = "cfg",
+    valuesSource = "",
   } = {},
 ) {
   const readers = [];
@@ -38,7 +41,8 @@ export function schemaForm(
   for (const [key, prop] of props) {
     const start =
       key in values ? values[key] : key in defaults ? defaults[key] : resolve(prop, schema).default;
-    const built = control(schema, prop, [key], start, { channels, prefix, idPrefix });
+    const origin = key in values ? valuesSource : "";
+    const built = control(schema, prop, [key], start, { channels, prefix, idPrefix, origin });
     readers.push([key, built.read]);
     (built.section ? sections : simple).push(built.el);
   }
@@ -116,6 +120,10 @@ function control(schema, prop, path, start, opts) {
   const id = `${opts.idPrefix}-${path.join("-")}`.replace(/[^\w-]/g, "_");
   const label = titleOf(key, inner);
   const help = inner.description ?? "";
+  // Where the default comes from (the config schema's "source": a paper's equation or
+  // table, or "mapwise default" where no paper gives the value).
+  const own = prop.source ?? resolve(prop, schema).source ?? inner.source ?? "";
+  const source = opts.origin ? `From the ${opts.origin}` : own ? `Default: ${own}` : "";
   const numberOrArray =
     alternatives.some((a) => a.type === "array") &&
     alternatives.some((a) => a.type === "number" || a.type === "integer");
@@ -142,6 +150,7 @@ function control(schema, prop, path, start, opts) {
     return wrap(h("label", { class: "check", for: id }, input, label), help, key, {
       checkbox: true,
       read,
+      source,
     });
   } else if (inner.type === "string" && /_channel$/.test(key) && opts.channels.length) {
     input = h(
@@ -155,6 +164,33 @@ function control(schema, prop, path, start, opts) {
       ),
     );
     read = () => input.value || undefined;
+  } else if (inner.type === "array" && resolve(inner.items, schema).enum) {
+    // A set of choices (e.g. the EKF's measured outputs): one check box per choice.
+    const choices = resolve(inner.items, schema).enum;
+    const chosen = new Set(Array.isArray(start) ? start : []);
+    const boxes = choices.map((v, i) =>
+      h("input", {
+        type: "checkbox",
+        id: `${id}-${i}`,
+        name,
+        value: String(v),
+        checked: chosen.has(v),
+      }),
+    );
+    input = h(
+      "div",
+      { class: "checks", role: "group", "aria-label": label, "data-field": name },
+      boxes.map((b, i) => h("label", { class: "check", for: b.id }, b, String(choices[i]))),
+    );
+    read = () => {
+      const picked = choices.filter((_, i) => boxes[i].checked);
+      const least = inner.minItems ?? 0;
+      if (picked.length < least)
+        throw Object.assign(new Error(`${label}: pick at least ${least}`), { field: name });
+      return picked;
+    };
+    const title = h("span", { class: "label" }, label, " ", h("code", { class: "help" }, key));
+    return wrap(title, help, key, { input, read, source });
   } else if (inner.type === "array" || numberOrArray) {
     const text = Array.isArray(start) ? start.join(", ") : (start ?? "");
     input = h("input", {
@@ -221,6 +257,7 @@ function control(schema, prop, path, start, opts) {
     input,
     read,
     range: rangeText(inner),
+    source,
   });
 }
 
@@ -252,13 +289,14 @@ function rangeText(p) {
   return [lo, hi].filter(Boolean).join(", ");
 }
 
-function wrap(labelEl, help, key, { input, read, checkbox = false, range = "" }) {
+function wrap(labelEl, help, key, { input, read, checkbox = false, range = "", source = "" }) {
   const el = h(
     "div",
     { class: "field", dataset: { key } },
     labelEl,
     checkbox ? null : input,
     help || range ? h("div", { class: "help" }, help, range ? ` (${range})` : "") : null,
+    source ? h("div", { class: "help", "data-source": "" }, source) : null,
   );
   return { el, read, section: false };
 }

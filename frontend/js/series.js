@@ -1,6 +1,7 @@
 /**
  * Time series of a run kept in the browser: appended from live deltas, capped by halving
- * (every other point) so long runs stay light, and looked up by the names the API uses.
+ * (min and max per bucket, so spikes stay) so long runs stay light, and looked up by the
+ * names the API uses.
  */
 import { SERIES_CAP } from "./constants.js";
 
@@ -54,11 +55,14 @@ export class SeriesStore {
     }
   }
 
+  /** Past the cap, about halve the series by min/max per bucket (not every other point), so
+   * a live run's spikes survive the thinning as they do the server's (app/io/decimate.py). */
   trim(name) {
     const s = this.data[name];
     if (s.values.length <= this.cap) return;
-    s.time = s.time.filter((_, k) => k % 2 === 0);
-    s.values = s.values.filter((_, k) => k % 2 === 0);
+    const { x, y } = decimate(s.time, s.values, Math.floor(this.cap / 2));
+    s.time = x;
+    s.values = y;
   }
 
   /**

@@ -3,6 +3,8 @@
  * the run goes on), a play button that steps through them, the label of the version shown
  * and "save as base map". It fetches versions itself and hands each one to onShow; the version
  * a person picks is reported to onScrub (the view keeps it in its URL, so a reload shows it again).
+ * Versions are named by their number in the run, v1…vN (`number` of the API's documents); the
+ * database `id` only addresses them in API calls.
  */
 import { api, showError } from "./api.js";
 import { fmt, fmtInt, h, icon, ICONS, toast } from "./dom.js";
@@ -20,7 +22,9 @@ export class VersionTimeline {
    * @param {() => void} opts.onLive        back to the live frames
    * @param {(versions: object[]) => void} [opts.onList]
    * @param {() => string} opts.baseMapName name for "save as base map"
-   * @param {number|null} [opts.initialVersion] version id to show first (e.g. from the URL)
+   * @param {string|number|null} [opts.initialVersion] version number (1…n) to show first, from
+   *   the URL's ?version=N; an old link's database id is taken when no version has that number
+   * @param {string|number|null} [opts.initialVersionId] database id to show first (?version_id=)
    * @param {(version: object|null) => void} [opts.onScrub] a version was picked (null: back to live/final)
    */
   constructor({
@@ -31,6 +35,7 @@ export class VersionTimeline {
     onList,
     baseMapName,
     initialVersion = null,
+    initialVersionId = null,
     onScrub = null,
   }) {
     Object.assign(this, {
@@ -40,7 +45,8 @@ export class VersionTimeline {
       onLive,
       onList,
       baseMapName,
-      initialVersion,
+      initialVersion: parseWanted(initialVersion),
+      initialVersionId: parseWanted(initialVersionId),
       onScrub,
     });
     this.versions = [];
@@ -84,6 +90,13 @@ export class VersionTimeline {
       "Back to live",
     );
     this.note = h("span", { class: "viewing", hidden: true, "data-viewing": "" });
+    // A ?version= that names no version of this run says so (never silently shows another).
+    this.missing = h("div", {
+      class: "banner warn",
+      role: "alert",
+      hidden: true,
+      "data-version-missing": "",
+    });
     this.labelInput = h("input", {
       type: "text",
       id: "version-label",
@@ -126,6 +139,7 @@ export class VersionTimeline {
     this.el = h(
       "div",
       {},
+      this.missing,
       h(
         "div",
         { class: "timeline" },
@@ -162,13 +176,11 @@ export class VersionTimeline {
       ),
     );
     this.onList?.(this.versions);
-    const wanted =
-      this.initialVersion === null
-        ? -1
-        : this.versions.findIndex((v) => v.id === this.initialVersion);
+    const wanted = this.viewing ? -1 : this.wantedIndex(live);
     if (wanted >= 0 && !this.viewing) {
       // A refresh that overlaps this one must not put the final version over it.
       this.initialVersion = null;
+      this.initialVersionId = null;
       this.showingInitial = true;
       try {
         await this.scrubTo(wanted);
@@ -182,6 +194,45 @@ export class VersionTimeline {
     }
   }
 
+  /**
+   * The index of the version the URL asked for, -1 if none was or it is not there: by number
+   * (?version=N), by database id (?version_id=ID), or an old link's ?version=ID when no version
+   * has that number. What is not there is said in the banner; while the run goes on, a number
+   * still to come stays wanted.
+   */
+  wantedIndex(live) {
+    const { initialVersion: n, initialVersionId: id } = this;
+    if (n === null && id === null) return -1;
+    const byNumber = (x) => this.versions.findIndex((v) => (v.number ?? 0) === x);
+    const byId = (x) => this.versions.findIndex((v) => v.id === x);
+    let k = -1;
+    if (typeof n === "number") k = byNumber(n);
+    if (k < 0 && typeof id === "number") k = byId(id);
+    if (k < 0 && typeof n === "number" && id === null) k = byId(n);
+    if (k >= 0) {
+      this.missing.hidden = true;
+      return k;
+    }
+    const count = this.versions.length;
+    const has = count ? `it has v1…v${count}` : "it has no versions yet";
+    let text;
+    if (typeof n === "string" || typeof id === "string") {
+      text = `“${n ?? id}” is not a version number; ${has}.`;
+    } else if (n !== null) {
+      text = `Run ${this.runId} has no version ${n}${live ? " yet" : ""} (${has}).`;
+    } else {
+      text = `Run ${this.runId} has no version with id ${id} (${has}).`;
+    }
+    this.missing.textContent = text;
+    this.missing.hidden = false;
+    // Only a number the live run may still reach is kept; anything else is settled.
+    if (!(live && typeof n === "number" && id === null)) {
+      this.initialVersion = null;
+      this.initialVersionId = null;
+    }
+    return -1;
+  }
+
   describe() {
     const k = Number(this.slider.value);
     const v = this.versions[k];
@@ -189,12 +240,17 @@ export class VersionTimeline {
       this.where.textContent = this.isLive()
         ? `live · ${this.versions.length} version(s) so far`
         : "no versions";
+      this.slider.setAttribute("aria-valuetext", this.where.textContent);
       return;
     }
-    this.where.textContent =
-      `version ${k + 1} of ${this.versions.length} · t = ${fmt(v.time_s, 4)} s · step ${fmtInt(v.step)}` +
-      (v.final ? " · final" : "") +
-      (v.label ? ` · “${v.label}”` : "");
+    const name = `v${v.number ?? k + 1}`;
+    this.where.replaceChildren(
+      h("b", { "data-version-number": "" }, name),
+      ` · version ${k + 1} of ${this.versions.length} · t = ${fmt(v.time_s, 4)} s · step ${fmtInt(v.step)}` +
+        (v.final ? " · final" : "") +
+        (v.label ? ` · “${v.label}”` : ""),
+    );
+    this.slider.setAttribute("aria-valuetext", `${name} of ${this.versions.length}`);
   }
 
   doc(v) {
@@ -229,7 +285,13 @@ export class VersionTimeline {
     this.labelInput.value = v.label ?? "";
     const noted = live || !v.final;
     this.note.hidden = !noted;
-    this.note.textContent = noted ? `viewing version ${k + 1}` : "";
+    this.note.textContent = noted ? `viewing v${v.number ?? k + 1}` : "";
+    if (!quiet) {
+      // A version picked settles what the URL asked for (a number still to come included).
+      this.missing.hidden = true;
+      this.initialVersion = null;
+      this.initialVersionId = null;
+    }
     this.liveButton.hidden = !live;
     this.describe();
     this.onShow(doc, v, { quiet });
@@ -305,7 +367,7 @@ export class VersionTimeline {
       const map = await api.post("/api/base-maps", {
         run_id: this.runId,
         version_id: v.id,
-        name: `${this.baseMapName()} v${v.step}`,
+        name: `${this.baseMapName()} v${v.number}`,
       });
       toast(`Saved base map #${map.id} “${map.name}”.`);
     } catch (err) {
@@ -316,4 +378,11 @@ export class VersionTimeline {
   destroy() {
     this.stopPlay();
   }
+}
+
+/** A version asked for in the URL: a positive integer, else the text as given (null: none). */
+function parseWanted(value) {
+  if (value === null || value === undefined || value === "") return null;
+  const text = String(value).trim();
+  return /^[1-9]\d{0,9}$/.test(text) ? Number(text) : text;
 }

@@ -123,7 +123,7 @@ def test_scrub_and_play_versions_then_label_and_export(page: Page, api, tmp_path
 
     # Versions view: A = first, B = final; their difference; label B; export both.
     a, b = versions[0], versions[-1]
-    page.goto(f"/versions?a={run['id']}:{a['id']}&b={run['id']}:{b['id']}")
+    page.goto(f"/versions?a={run['id']}:{a['number']}&b={run['id']}:{b['number']}")
     doc_a = first
     doc_b = api.get(f"/api/runs/{run['id']}/versions/{b['id']}").json()
     max_diff = max(
@@ -164,5 +164,5 @@ def test_scrub_and_play_versions_then_label_and_export(page: Page, api, tmp_path
 
     shot(page, "versions")
     page.reload()
-    expect(page.locator("#version-a")).to_have_value(str(a["id"]))
-    expect(page.locator("#version-b")).to_have_value(str(b["id"]))
+    expect(page.locator("#version-a")).to_have_value(str(a["number"]))
+    expect(page.locator("#version-b")).to_have_value(str(b["number"]))

@@ -83,8 +83,11 @@ def test_save_a_version_as_base_map_and_start_from_it(page: Page, api) -> None:
     base = next(
         m
         for m in api.get("/api/base-maps", params={"limit": 500}).json()["items"]
-        if f"run {source['id']} version" in m["name"]
+        if m["lineage"]["run_id"] == source["id"]
     )
+    # Named by the run and the version's number in it (1…n), not a database id.
+    number = base["lineage"]["version_number"]
+    assert base["name"] == f"{source['name']} v{number}", base["name"]
 
     page.goto(run_form_url(dataset["id"]))
     page.check("#start-base")

@@ -206,7 +206,9 @@ def test_compare_and_versions_show_the_same_slice(page: Page, api, dataset: dict
     shot(page, "compare-3d")
 
     # Versions: A, B and B − A on one slice.
-    page.goto(f"/versions?a={a['id']}:{docs[a['id']]['id']}&b={b['id']}:{docs[b['id']]['id']}")
+    page.goto(
+        f"/versions?a={a['id']}:{docs[a['id']]['number']}&b={b['id']}:{docs[b['id']]['number']}"
+    )
     expect(page.locator('[data-stat="max"]')).to_be_visible()
     for plot in ("version-a", "version-b", "diff"):
         expect(picker_label(page, plot)).to_have_text("Slice at coolant_c = 20 degC")

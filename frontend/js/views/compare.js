@@ -3,8 +3,8 @@
  * data through several estimators) the final maps side by side on one colour scale, their
  * differences to a reference run, the error signals overlaid, and a metrics table sortable
  * by any column. Refreshes itself while any of the runs is still going.
- * URL: /compare?runs=1,2&ref=1&sort=output_rmse:desc (reference run of the differences and the
- * sorted column, so a reload or a pasted link shows the same table).
+ * URL: /compare?runs=1,2&ref=1&sort=output_rmse:desc&y=full (reference run of the differences,
+ * the sorted column and the errors' full y-range, so a reload or a pasted link shows the same).
  */
 import { api, estimators } from "../api.js";
 import { EVT, RUN_ACTIVE, SELECT } from "../constants.js";
@@ -12,7 +12,6 @@ import {
   card,
   fill,
   fmt,
-  fmtDate,
   fmtDuration,
   h,
   icon,
@@ -23,11 +22,13 @@ import {
   statusBadge,
   withUnit,
 } from "../dom.js";
+import { errorOf, groupByAxis, stackAxes } from "../error-axes.js";
 import { diffNested, sameGrid } from "../grid-math.js";
 import { MapPlot, SliceGroup } from "../map-plot.js";
 import { axis, baseLayout, purge, react, SERIES_COLORS } from "../plot.js";
 import { poll } from "../poll.js";
 import { SCOPE } from "../scopes.js";
+import { runsListCard } from "./runs-list.js";
 import { decimate, SeriesStore } from "../series.js";
 
 export const title = "Runs & compare";
@@ -59,12 +60,10 @@ export async function mount(root, ctx) {
     .map(Number)
     .filter((n) => Number.isInteger(n) && n > 0);
   const cleanups = [];
-  const [catalog, allRuns, datasets] = await Promise.all([
+  const [catalog, datasets] = await Promise.all([
     estimators(),
-    api.all("/api/runs", { signal: ctx.signal }),
     api.all("/api/datasets", { signal: ctx.signal }),
   ]);
-  const datasetName = (dsId) => datasets.find((d) => d.id === dsId)?.name ?? `#${dsId}`;
 
   root.append(
     pageHead({
@@ -87,7 +86,7 @@ export async function mount(root, ctx) {
   root.append(
     comparison,
     h("div", { style: { height: "16px" } }),
-    pickerCard(allRuns, ids, datasetName, catalog, ctx),
+    runsListCard({ selectedIds: ids, datasets, catalog, ctx }).element,
   );
 
   if (!ids.length) return () => cleanups.forEach((f) => f());
@@ -100,12 +99,14 @@ export async function mount(root, ctx) {
     plots: [],
     last: null,
     slices: new SliceGroup(),
+    fullRange: ctx.query.get("y") === "full",
   };
   const syncUrl = () =>
     ctx.setQuery({
       runs: ids.join(","),
       ref: view.ref !== ids[0] ? view.ref : undefined,
       sort: formatSort(view.sort),
+      y: view.fullRange ? "full" : undefined,
     });
 
   /** Fetch and draw the comparison; whether to fetch again (a run is still going). */
@@ -130,6 +131,11 @@ export async function mount(root, ctx) {
     );
     view.last = { runs, series };
     render();
+    // The run list below was fetched once, at mount: keep its status badges current.
+    for (const r of runs) {
+      for (const badge of root.querySelectorAll(`tr[data-run-id="${r.id}"] .badge[data-status]`))
+        badge.replaceWith(statusBadge(r.status));
+    }
     return runs.some((r) => RUN_ACTIVE.has(r.status));
   }
 
@@ -399,6 +405,12 @@ export async function mount(root, ctx) {
     );
   }
 
+  /**
+   * The runs' error signals overlaid: one subplot (and y-axis) per quantity and unit, titled by
+   * the signal ("Torque error", "MAF error", "Residual") with the series' own unit, on a shared
+   * time axis. Each y-axis spans the 1st–99th percentile of its data plus a margin, so a t = 0
+   * transient does not flatten the rest; "Full range" shows every value.
+   */
   function errorsCard(runs, seriesList) {
     const el = h("div", {
       class: "plot medium",
@@ -406,53 +418,102 @@ export async function mount(root, ctx) {
       role: "img",
       "aria-label": "Error signals of the runs overlaid",
     });
-    const data = [];
-    let unit = "";
-    let trueTorque = null;
+    const entries = [];
     runs.forEach((r, k) => {
       const raw = seriesList[k];
       if (!raw) return;
       const store = new SeriesStore();
       store.reset(raw.series ?? {}, raw.time ?? null);
-      const err = store.pick("error") ?? store.pick("residual");
+      const err = errorOf(store);
       if (!err) return;
-      unit = err.unit || unit;
       const { x, y } = decimate(err.time, err.values);
-      data.push({
-        type: "scatter",
-        mode: "lines",
+      entries.push({
+        ...err,
+        run: r,
+        color: SERIES_COLORS[k % SERIES_COLORS.length],
         x,
-        y,
-        name: `#${r.id} ${r.estimator}`,
-        line: { color: SERIES_COLORS[k % SERIES_COLORS.length], width: 1.3 },
-        opacity: 0.9,
-        hovertemplate: `#${r.id} ${r.estimator}: %{y:.4g} ${err.unit ?? ""}<extra></extra>`,
+        values: y,
       });
-      trueTorque = trueTorque ?? store.pick("truth");
     });
-    if (!data.length) {
+    if (!entries.length) {
       return card({
         title: "Errors overlaid",
         body: h("p", { class: "help" }, "No error series yet."),
       });
     }
-    pendingDraws.push(() =>
-      react(
-        el,
-        data,
-        baseLayout({
-          xaxis: axis("time [s]"),
-          yaxis: axis(withUnit(trueTorque ? "torque error" : "residual", unit), { zeroline: true }),
-          margin: { l: 62, r: 12, t: 28, b: 40 },
-        }),
-      ),
+    const groups = groupByAxis(entries);
+    const axes = stackAxes(groups);
+    const data = groups.flatMap((g, i) =>
+      g.entries.map((e) => ({
+        type: "scatter",
+        mode: "lines",
+        x: e.x,
+        y: e.values,
+        yaxis: axes[i].yaxis,
+        name: `#${e.run.id} ${e.run.estimator}`,
+        legendgroup: `run-${e.run.id}`,
+        line: { color: e.color, width: 1.3 },
+        opacity: 0.9,
+        hovertemplate: `#${e.run.id} ${e.run.estimator}: %{y:.4g} ${e.unit ?? ""}<extra>${g.title}</extra>`,
+      })),
     );
+    el.style.height = `${300 + 230 * (groups.length - 1)}px`;
+    const full = view.fullRange;
+    const layout = baseLayout({
+      xaxis: axis("time [s]", { anchor: axes[axes.length - 1].yaxis }),
+      margin: { l: 62, r: 12, t: 28, b: 40 },
+      uirevision: full ? "full" : "robust", // a toggle resets any zoom
+      annotations: groups.map((g, i) => ({
+        text: `<b>${g.title}</b>`,
+        xref: "paper",
+        yref: "paper",
+        x: 1, // the legend takes the left of the top edge
+        y: axes[i].domain[1],
+        xanchor: "right",
+        yanchor: "bottom",
+        showarrow: false,
+        font: { size: 12 },
+      })),
+    });
+    groups.forEach((g, i) => {
+      const a = axes[i];
+      layout[a.layoutKey] = axis(withUnit(g.title, g.unit), {
+        zeroline: true,
+        domain: a.domain,
+        anchor: "x",
+        ...(full || !a.range ? { autorange: true } : { range: a.range, autorange: false }),
+      });
+    });
+    pendingDraws.push(() => react(el, data, layout));
     view.plots.push(el);
+    const clipped = axes.reduce((n, a) => n + a.outside, 0);
+    const toggle = h(
+      "button",
+      {
+        type: "button",
+        "data-full-range": "",
+        "aria-pressed": String(full),
+        title: full
+          ? "Scale each axis to the 1st–99th percentile of its data"
+          : "Scale each axis to all its data, transients and spikes included",
+        onclick: () => {
+          view.fullRange = !view.fullRange;
+          syncUrl();
+          render();
+          root.querySelector("[data-full-range]")?.focus();
+        },
+      },
+      "Full range",
+    );
+    const hints = [...new Set(groups.map((g) => g.entries[0].hint))].join("; ");
     return card({
       title: "Errors overlaid",
-      hint: trueTorque ? "true − estimated" : "measured − predicted",
+      hint: full
+        ? `${hints}; full range`
+        : `${hints}; y: 1st–99th percentile${clipped ? `, ${clipped} points beyond` : ""}`,
       body: el,
       bodyCls: "tight",
+      actions: [toggle],
     });
   }
 
@@ -464,114 +525,4 @@ export async function mount(root, ctx) {
     view.plots.forEach((p) => (p instanceof MapPlot ? p.destroy() : purge(p)));
     cleanups.forEach((f) => f());
   };
-}
-
-/** All runs, filterable by dataset, with checkboxes to pick the ones to compare. */
-function pickerCard(runs, selectedIds, datasetName, catalog, ctx) {
-  const selected = new Set(selectedIds);
-  const filter = h(
-    "select",
-    { id: "runs-dataset", "aria-label": "Filter by dataset" },
-    h("option", { value: "" }, "All datasets"),
-    [...new Set(runs.map((r) => r.dataset_id))].map((d) =>
-      h("option", { value: String(d) }, datasetName(d)),
-    ),
-  );
-  const button = h(
-    "button",
-    { type: "button", class: "primary", "data-compare-selected": "" },
-    icon(ICONS.compare),
-    "Compare selected",
-  );
-  const tbody = h("tbody");
-  const count = () => {
-    button.disabled = selected.size < 1;
-    button.replaceChildren(
-      icon(ICONS.compare),
-      selected.size > 1 ? `Compare ${selected.size} runs` : "Compare selected",
-    );
-  };
-  const renderRows = () => {
-    const shown = runs.filter((r) => !filter.value || String(r.dataset_id) === filter.value);
-    tbody.replaceChildren(
-      ...shown.map((r) => {
-        const est = catalog.find((e) => e.name === r.estimator);
-        const box = h("input", {
-          type: "checkbox",
-          id: `pick-${r.id}`,
-          checked: selected.has(r.id),
-          "aria-label": `Select run ${r.id}`,
-          onchange: (e) => {
-            if (e.target.checked) selected.add(r.id);
-            else selected.delete(r.id);
-            count();
-          },
-        });
-        const keyMetric = Object.entries(r.metrics ?? {}).find(([k]) =>
-          ["ise", "output_rmse", "rmse", "mae"].includes(k),
-        );
-        return h(
-          "tr",
-          { dataset: { runId: r.id } },
-          h("td", {}, box),
-          h(
-            "td",
-            { class: "wrap" },
-            h("a", { href: `/runs/${r.id}` }, `#${r.id}`),
-            " ",
-            h("span", { class: "sub" }, r.name ?? ""),
-          ),
-          h(
-            "td",
-            { class: "wrap" },
-            h("code", { class: "tag accent" }, r.estimator),
-            " ",
-            h("span", { class: "sub" }, est?.title ?? ""),
-          ),
-          h("td", { class: "wrap" }, datasetName(r.dataset_id)),
-          h("td", {}, statusBadge(r.status)),
-          h(
-            "td",
-            { class: "num" },
-            keyMetric ? `${metricLabel(keyMetric[0])} ${fmt(keyMetric[1])}` : "–",
-          ),
-          h("td", {}, fmtDate(r.created_at)),
-        );
-      }),
-    );
-  };
-  filter.addEventListener("change", renderRows);
-  button.addEventListener("click", () =>
-    ctx.navigate(`/compare?runs=${[...selected].sort((a, b) => a - b).join(",")}`),
-  );
-  renderRows();
-  count();
-  return card({
-    title: "All runs",
-    actions: [h("div", { style: { width: "220px" } }, filter), button],
-    bodyCls: "flush",
-    body: runs.length
-      ? h(
-          "div",
-          { class: "table-wrap" },
-          h(
-            "table",
-            { class: "data", "data-runs-table": "" },
-            h(
-              "thead",
-              {},
-              h(
-                "tr",
-                {},
-                h("th", { scope: "col" }, h("span", { class: "visually-hidden" }, "Select")),
-                ...["Run", "Estimator", "Dataset", "Status", "Key metric", "Created"].map((t) =>
-                  h("th", { scope: "col", class: t === "Key metric" ? "num" : null }, t),
-                ),
-              ),
-            ),
-            tbody,
-          ),
-        )
-      : h("div", { class: "empty" }, "No runs yet. ", h("a", { href: "/runs/new" }, "Start one →")),
-  });
 }

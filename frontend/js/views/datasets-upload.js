@@ -76,6 +76,30 @@ export function uploadCard(ctx, onCreated) {
     spellcheck: "false",
     "aria-describedby": "upload-channels-help",
   });
+  // A CSV without a time column has no time base: the rows' rate must be given (the server
+  // refuses the file otherwise, naming `time`).
+  const rateInput = h("input", {
+    type: "number",
+    id: "upload-rate",
+    name: "rate_hz",
+    min: "0",
+    step: "any",
+    placeholder: "e.g. 100",
+    "data-field": "time",
+    "aria-describedby": "upload-rate-help",
+  });
+  const rateField = h(
+    "div",
+    { class: "field", hidden: true, "data-upload-rate": "" },
+    h("label", { for: "upload-rate" }, "Sample rate of the rows [Hz]"),
+    rateInput,
+    h(
+      "div",
+      { class: "banner warn", id: "upload-rate-help", role: "note" },
+      `No time column (${TIME_COLUMNS.join(", ")}): give the rate the rows were logged at, ` +
+        "or add a time column in seconds.",
+    ),
+  );
   const fileInfo = h("div", { class: "upload-file", hidden: true });
   const columns = h("div", { "data-upload-columns": "" });
   const progress = uploadProgress();
@@ -101,6 +125,7 @@ export function uploadCard(ctx, onCreated) {
     { novalidate: true, "aria-label": "Upload a log" },
     h("div", { class: "field" }, drop, fileInfo),
     columns,
+    rateField,
     h("div", { class: "field" }, h("label", { for: "upload-name" }, "Dataset name"), nameInput),
     h(
       "div",
@@ -146,7 +171,12 @@ export function uploadCard(ctx, onCreated) {
       h("span", { class: "ch-unit" }, fmtBytes(f.size)),
     );
     if (!nameInput.value) nameInput.placeholder = f.name.replace(/\.[^.]+$/, "");
-    if (/\.(csv|txt)$/i.test(f.name)) columns.append(await columnEditor(f, units));
+    rateInput.value = "";
+    rateField.hidden = true;
+    if (/\.(csv|txt)$/i.test(f.name)) {
+      columns.append(await columnEditor(f, units));
+      rateField.hidden = await hasTimeColumn(f);
+    }
   };
 
   fileInput.addEventListener("change", () => choose(fileInput.files[0] ?? null));
@@ -176,6 +206,7 @@ export function uploadCard(ctx, onCreated) {
     // Blank means the server's default (the slowest raster; every channel).
     if (rasterInput.value.trim()) body.append("raster", rasterInput.value.trim());
     if (channelsInput.value.trim()) body.append("channels", channelsInput.value.trim());
+    if (rateInput.value.trim()) body.append("rate_hz", rateInput.value.trim());
     submit.disabled = true;
     progress.start();
     try {
@@ -189,9 +220,12 @@ export function uploadCard(ctx, onCreated) {
       nameInput.value = "";
       fileInfo.hidden = true;
       columns.replaceChildren();
+      rateInput.value = "";
+      rateField.hidden = true;
       await onCreated(dataset);
     } catch (err) {
       progress.finish(false);
+      if (err?.field === "time" || err?.field === "rate_hz") rateField.hidden = false;
       showUploadError(form, err);
     } finally {
       submit.disabled = !file;
@@ -212,6 +246,25 @@ function showUploadError(form, err) {
       field: `column:${err.field}`,
     });
   return showError(form, err);
+}
+
+/** The column names the server takes as time (app/io/csv_files.py TIME_COLUMNS). */
+const TIME_COLUMNS = ["time", "time_s", "t", "timestamp", "timestamps"];
+
+/** Whether a CSV's header names a time column (or cannot be read: the server judges). */
+async function hasTimeColumn(file) {
+  const head = await file.slice(0, 64 * 1024).text();
+  const line = head
+    .replace(/^\uFEFF/, "")
+    .split(/\r?\n/)
+    .find((l) => l.trim() && !l.trimStart().startsWith("#"));
+  if (!line) return true;
+  const sep = [",", ";", "\t"]
+    .map((s) => [s, line.split(s).length])
+    .sort((a, b) => b[1] - a[1])[0][0];
+  const names = line.split(sep).map((c) => splitHeader(c.replace(/^"|"$/g, "")).name);
+  if (names.length < 2) return true;
+  return names.some((n) => TIME_COLUMNS.includes(n));
 }
 
 /** Columns of a CSV header with their units; units can be filled in before upload. */

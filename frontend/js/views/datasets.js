@@ -165,7 +165,7 @@ export async function mount(root, ctx) {
         h("td", { class: "num" }, `${fmt(d.rate_hz, 3)} Hz`),
         h("td", { class: "num" }, fmtDuration(d.duration_s)),
         h("td", { class: "num" }, String(d.channels?.length ?? 0)),
-        h("td", {}, fmtDate(d.created_at)),
+        h("td", { class: "date" }, fmtDate(d.created_at)),
         h(
           "td",
           { class: "num" },
@@ -205,7 +205,7 @@ export async function mount(root, ctx) {
         { class: "table-wrap" },
         h(
           "table",
-          { class: "data" },
+          { class: "data compact" },
           h(
             "thead",
             {},
@@ -318,6 +318,24 @@ export async function mount(root, ctx) {
     }
   }
 
+  /** Why the dataset cannot simply go, in words (the API's message names its parameters). */
+  async function inUseMessage(dataset) {
+    let runs = "some runs";
+    try {
+      const page = await api.get("/api/runs", {
+        query: { dataset_id: dataset.id, limit: 1 },
+        signal: ctx.signal,
+      });
+      runs = page.total === 1 ? "1 run" : `${fmtInt(page.total)} runs`;
+    } catch {
+      // The count is a nicety: the question stands without it.
+    }
+    return (
+      `“${dataset.name}” is used by ${runs}. Deleting it also deletes those runs ` +
+      "and their map versions. This cannot be undone."
+    );
+  }
+
   async function remove(dataset) {
     const ok = await confirmDialog(
       `Delete “${dataset.name}” (${fmtInt(dataset.rows)} rows)? This cannot be undone.`,
@@ -328,10 +346,11 @@ export async function mount(root, ctx) {
       await api.del(`/api/datasets/${dataset.id}`);
     } catch (err) {
       if (err.code !== "conflict") return showError(root, err);
-      const force = await confirmDialog(
-        `${err.message} Delete the dataset together with its runs and map versions?`,
-        { title: "Dataset in use", confirmLabel: "Delete everything", danger: true },
-      );
+      const force = await confirmDialog(await inUseMessage(dataset), {
+        title: "Dataset in use",
+        confirmLabel: "Delete everything",
+        danger: true,
+      });
       if (!force) return;
       try {
         await api.del(`/api/datasets/${dataset.id}`, { query: { force: "true" } });
@@ -390,8 +409,19 @@ function simulateCard(ctx, onCreated) {
     name: "name",
     placeholder: "defaults to the scenario name",
   });
+  const duration = h("input", {
+    type: "number",
+    id: "sim-duration",
+    name: "duration_s",
+    min: "0",
+    step: "any",
+    placeholder: "whole record",
+    "aria-describedby": "sim-duration-help",
+  });
+  const durationHelp = h("div", { class: "help", id: "sim-duration-help" });
   const about = h("div", { class: "help", "data-scenario-about": "" });
   const submit = h("button", { type: "submit", class: "primary" }, icon(ICONS.flask), "Simulate");
+  const progress = h("div", { class: "help", role: "status", "data-sim-progress": "" });
   let list = [];
   const form = h(
     "form",
@@ -403,8 +433,15 @@ function simulateCard(ctx, onCreated) {
       h("div", { class: "field" }, h("label", { for: "sim-seed" }, "Seed"), seed),
       h("div", { class: "field" }, h("label", { for: "sim-name" }, "Name"), name),
     ),
+    h(
+      "div",
+      { class: "field" },
+      h("label", { for: "sim-duration" }, "Duration [s]"),
+      duration,
+      durationHelp,
+    ),
     h("div", { class: "banner error", "data-form-error": "", hidden: true }),
-    h("div", { class: "row end" }, submit),
+    h("div", { class: "row end" }, progress, submit),
   );
 
   const describe = () => {
@@ -414,6 +451,12 @@ function simulateCard(ctx, onCreated) {
         ? `${s.description} (${fmt(s.rate_hz, 3)} Hz, ${fmtDuration(s.duration_s)}; for ${s.estimators.join(", ")})`
         : "",
     );
+    // The scenario's record bounds the duration; empty simulates all of it.
+    duration.max = s ? String(s.duration_s) : "";
+    duration.placeholder = s ? `whole record, ${fmt(s.duration_s, 4)} s` : "whole record";
+    durationHelp.textContent = s
+      ? `Simulate only the first seconds (up to ${fmt(s.duration_s, 4)} s); empty: all of it.`
+      : "";
   };
   select.addEventListener("change", describe);
   scenarios()
@@ -437,14 +480,24 @@ function simulateCard(ctx, onCreated) {
     clearErrors(form);
     submit.disabled = true;
     submit.replaceChildren(icon(ICONS.flask), "Simulating…");
+    // The server answers when the whole record is simulated: show the time spent so far.
+    const started = performance.now();
+    const tick = () => {
+      const s = Math.round((performance.now() - started) / 1000);
+      progress.textContent = s >= 2 ? `Simulating… ${s} s so far` : "";
+    };
+    const timer = setInterval(tick, 1000);
     try {
       const body = { scenario: select.value, seed: Number(seed.value || 0) };
       if (name.value.trim()) body.name = name.value.trim();
+      if (duration.value.trim() !== "") body.duration_s = Number(duration.value);
       const dataset = await api.post("/api/datasets/simulate", body, { signal: ctx.signal });
       await onCreated(dataset);
     } catch (err) {
       showError(form, err);
     } finally {
+      clearInterval(timer);
+      progress.textContent = "";
       submit.disabled = false;
       submit.replaceChildren(icon(ICONS.flask), "Simulate");
     }

@@ -1,7 +1,9 @@
 /**
  * Versions: pick two map versions (of one run or two), see both on one colour scale and their
  * difference B − A, label either ("release candidate"), export it or keep it as a base map.
- * URL: /versions?a=RUN:VERSION&b=RUN:VERSION (a=RUN alone: its first and final versions).
+ * URL: /versions?a=RUN:N&b=RUN:N, N a version's number 1…n in its run (a=RUN alone: its first
+ * and final versions). An old link's RUN:ID (database id) still opens that version when no
+ * version has that number; a number the run does not have is said, never silently replaced.
  */
 import { api, clearErrors, showError } from "../api.js";
 import { EVT, EXPORT_FORMATS } from "../constants.js";
@@ -40,16 +42,37 @@ export async function mount(root, ctx) {
   }
 
   const parse = (text) => {
-    const [r, v] = String(text ?? "")
-      .split(":")
-      .map(Number);
+    const [r, v] = String(text ?? "").split(":");
+    const run = Number(r);
+    const version = v === undefined || v === "" ? null : Number(v);
     return {
-      run: Number.isInteger(r) && r > 0 ? r : null,
-      version: Number.isInteger(v) && v > 0 ? v : null,
+      run: Number.isInteger(run) && run > 0 ? run : null,
+      // version: the number asked for; asked: the text, kept to name what is not there
+      version: Number.isInteger(version) && version > 0 ? version : null,
+      asked: v === undefined || v === "" ? null : v,
     };
   };
   const a = parse(ctx.query.get("a"));
   const b = parse(ctx.query.get("b"));
+  // A run the URL names that is not listed (no such run, or one without a map) is said,
+  // never silently replaced by another run.
+  for (const [key, side] of [
+    ["A", a],
+    ["B", b],
+  ]) {
+    if (side.run === null || runs.some((r) => r.id === side.run)) continue;
+    const noMap = allRuns.some((r) => r.id === side.run);
+    const asked = side.asked ? `, so there is no version ${side.asked}` : "";
+    root.append(
+      h(
+        "div",
+        { class: "banner warn", role: "alert", "data-run-missing": key.toLowerCase() },
+        `${key}: run ${side.run} ${noMap ? "produces no map" : "not found"}${asked}. ` +
+          "Showing another run instead; pick one below.",
+      ),
+    );
+    Object.assign(side, { run: null, version: null, asked: null });
+  }
   if (!a.run)
     a.run = runs.find((r) => r.n_versions > 0 || r.status === "succeeded")?.id ?? runs[0].id;
   if (!b.run) b.run = a.run;
@@ -118,6 +141,12 @@ export async function mount(root, ctx) {
       "aria-label": `Map version ${key.toUpperCase()}`,
     });
     const info = h("div", { class: "help", "data-version-info": key });
+    const missing = h("div", {
+      class: "banner warn",
+      role: "alert",
+      hidden: true,
+      "data-version-missing": key,
+    });
     const labelInput = h("input", {
       type: "text",
       id: `label-${key}`,
@@ -155,10 +184,10 @@ export async function mount(root, ctx) {
       clearErrors(form);
       if (!side.doc) return;
       try {
-        const updated = await api.patch(`/api/runs/${side.run}/versions/${side.version}`, {
+        const updated = await api.patch(`/api/runs/${side.run}/versions/${side.doc.id}`, {
           label: labelInput.value.trim() || null,
         });
-        const v = side.versions.find((x) => x.id === side.version);
+        const v = side.versions.find((x) => x.id === side.doc.id);
         if (v) v.label = updated.label;
         fillVersions(key);
         toast(updated.label ? `Labelled “${updated.label}”.` : "Label removed.");
@@ -176,7 +205,7 @@ export async function mount(root, ctx) {
       try {
         await api.download(
           `/api/runs/${side.run}/export`,
-          { format: format.value, version: side.version },
+          { format: format.value, version: side.doc?.id },
           `run-${side.run}-v${side.version}.${format.value}`,
         );
       } catch (err) {
@@ -190,10 +219,11 @@ export async function mount(root, ctx) {
     );
     baseBtn.addEventListener("click", async () => {
       try {
+        const runName = runs.find((r) => r.id === side.run)?.name || `run ${side.run}`;
         const map = await api.post("/api/base-maps", {
           run_id: side.run,
-          version_id: side.version,
-          name: `run ${side.run} version ${side.version}${labelInput.value ? ` (${labelInput.value})` : ""}`,
+          version_id: side.doc?.id,
+          name: `${runName} v${side.version}${labelInput.value ? ` (${labelInput.value})` : ""}`,
         });
         toast(`Saved base map #${map.id}.`);
       } catch (err) {
@@ -203,10 +233,12 @@ export async function mount(root, ctx) {
     runSelect.addEventListener("change", async () => {
       side.run = Number(runSelect.value);
       side.version = null;
+      side.asked = null;
       await loadRun(key);
     });
     versionSelect.addEventListener("change", async () => {
       side.version = Number(versionSelect.value);
+      missing.hidden = true;
       await loadVersion(key);
     });
     const { unit, label } = unitOf(side.run);
@@ -228,24 +260,25 @@ export async function mount(root, ctx) {
             versionSelect,
           ),
         ),
+        missing,
         plotEl,
         info,
         form,
       ),
       foot: [h("div", { style: { width: "190px" } }, format), exportBtn, baseBtn],
     });
-    return { el, versionSelect, labelInput, info, runSelect };
+    return { el, versionSelect, labelInput, info, missing, runSelect };
   }
 
   function fillVersions(key) {
     const side = sides[key];
     const { versionSelect } = sideCards[key];
     versionSelect.replaceChildren(
-      ...side.versions.map((v, k) =>
+      ...side.versions.map((v) =>
         h(
           "option",
-          { value: String(v.id), selected: v.id === side.version },
-          `${k + 1}. t = ${fmt(v.time_s, 4)} s · step ${fmtInt(v.step)}${v.final ? " · final" : ""}${v.label ? ` · “${v.label}”` : ""}`,
+          { value: String(v.number), selected: v.number === side.version },
+          `v${v.number} · t = ${fmt(v.time_s, 4)} s · step ${fmtInt(v.step)}${v.final ? " · final" : ""}${v.label ? ` · “${v.label}”` : ""}`,
         ),
       ),
     );
@@ -255,11 +288,12 @@ export async function mount(root, ctx) {
     const side = sides[key];
     const body = await api.get(`/api/runs/${side.run}/versions`, { signal: ctx.signal });
     side.versions = Array.isArray(body) ? body : (body.items ?? []);
-    if (!side.versions.some((v) => v.id === side.version)) {
+    resolveAsked(key);
+    if (!side.versions.some((v) => v.number === side.version)) {
       side.version = side.versions.length
         ? key === "a"
-          ? side.versions[0].id
-          : side.versions.at(-1).id
+          ? side.versions[0].number
+          : side.versions.at(-1).number
         : null;
     }
     const { unit, label } = unitOf(side.run);
@@ -271,10 +305,40 @@ export async function mount(root, ctx) {
     await loadVersion(key);
   }
 
+  /**
+   * The version the URL asked for: its number in the run; else, from an old link, the version
+   * with that database id; else the banner says the run has no such version (and the side
+   * shows its default, first or final).
+   */
+  function resolveAsked(key) {
+    const side = sides[key];
+    const { missing } = sideCards[key];
+    const asked = side.asked;
+    side.asked = null;
+    missing.hidden = true;
+    if (asked === null) return;
+    if (side.versions.some((v) => v.number === side.version)) return;
+    const old = side.versions.find((v) => v.id === side.version);
+    if (old) {
+      side.version = old.number;
+      return;
+    }
+    const n = side.versions.length;
+    const has = n ? `it has v1…v${n}` : "it has no versions yet";
+    missing.textContent =
+      side.version === null
+        ? `“${asked}” is not a version number (${has}).`
+        : `Run ${side.run} has no version ${side.version} (${has})` +
+          (n ? `; showing v${key === "a" ? 1 : n} instead.` : ".");
+    missing.hidden = false;
+    side.version = null;
+  }
+
   async function loadVersion(key) {
     const side = sides[key];
     const card = sideCards[key];
-    if (!side.version) {
+    const summary = side.versions.find((v) => v.number === side.version);
+    if (!summary) {
       side.doc = null;
       card.info.textContent = "This run has no map versions yet.";
       plots[key].clear();
@@ -282,12 +346,12 @@ export async function mount(root, ctx) {
       drawDiff();
       return;
     }
-    side.doc = await api.get(`/api/runs/${side.run}/versions/${side.version}`, {
+    side.doc = await api.get(`/api/runs/${side.run}/versions/${summary.id}`, {
       signal: ctx.signal,
     });
     card.labelInput.value = side.doc.label ?? "";
     card.info.textContent =
-      `run #${side.run} · step ${fmtInt(side.doc.step)} · t = ${fmt(side.doc.time_s, 4)} s` +
+      `run #${side.run} v${side.doc.number} · step ${fmtInt(side.doc.step)} · t = ${fmt(side.doc.time_s, 4)} s` +
       (side.doc.axes
         ? ` · ${side.doc.axes.map((x) => `${x.name} (${x.breakpoints.length})`).join(" × ")}`
         : "");
@@ -346,12 +410,12 @@ export async function mount(root, ctx) {
         stat(
           "A",
           "a",
-          `run #${sides.a.run}, step ${fmtInt(A.step)}${A.label ? ` “${A.label}”` : ""}`,
+          `run #${sides.a.run} v${A.number}, step ${fmtInt(A.step)}${A.label ? ` “${A.label}”` : ""}`,
         ),
         stat(
           "B",
           "b",
-          `run #${sides.b.run}, step ${fmtInt(B.step)}${B.label ? ` “${B.label}”` : ""}`,
+          `run #${sides.b.run} v${B.number}, step ${fmtInt(B.step)}${B.label ? ` “${B.label}”` : ""}`,
         ),
         stat("max |Δ|", "max", `${fmt(maxAbs)}${unit}`),
         stat("RMS Δ", "rms", `${fmt(rms)}${unit}`),

@@ -9,6 +9,7 @@ import { rolesOf } from "../../mapping.js";
 import { schemaForm } from "../../schema-form.js";
 import { restoreControls } from "./draft.js";
 import { shortPaper } from "./picker.js";
+import { startOf } from "./setup.js";
 import { channels, selectedEstimators } from "./state.js";
 
 /** Config properties filled from the signal mapping and the grid editor, not the form. */
@@ -22,17 +23,29 @@ export function hiddenKeys(est) {
   ]);
 }
 
-/** The form of one estimator in its tab panel, with the draft's values put back once. */
+/**
+ * The form of one estimator in its tab panel: the catalog's defaults, overridden by the
+ * scenario's setup or a previous run (setup.js), with the draft's values put back once.
+ */
 function configForm(view, e) {
   const { state, draft } = view;
+  const start = startOf(view, e.name);
   const f = schemaForm(e.config_schema ?? {}, {
     defaults: e.defaults ?? {},
+    values: start?.config ?? {},
+    valuesSource: start?.source ?? "",
     hide: hiddenKeys(e),
     channels: channels(view),
     idPrefix: `cfg-${e.name}`,
   });
   f.datasetId = state.datasetId;
-  const about = `${e.title}. Defaults follow ${e.paper ? shortPaper(e.paper) : "the paper"}.`;
+  f.source = start?.source ?? "";
+  const paper = e.paper ? shortPaper(e.paper) : "";
+  const about = start
+    ? `${e.title}. Settings from the ${start.source}; the rest are the defaults ` +
+      "(each field says where its default comes from)."
+    : `${e.title}${paper ? ` (${paper})` : ""}. Each field says where its default comes from: ` +
+      "a paper's value, or a mapwise default where the paper gives none.";
   f.panel = h(
     "div",
     {
@@ -58,7 +71,10 @@ export function renderConfig(view) {
   const keep = new Map();
   for (const e of ests) {
     const existing = state.forms.get(e.name);
-    const reuse = existing && existing.datasetId === state.datasetId;
+    const reuse =
+      existing &&
+      existing.datasetId === state.datasetId &&
+      existing.source === (startOf(view, e.name)?.source ?? "");
     keep.set(e.name, reuse ? existing : configForm(view, e));
   }
   state.forms = keep;

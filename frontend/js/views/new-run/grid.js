@@ -6,6 +6,7 @@
 import { gridEditor } from "../../grid-editor.js";
 import { guessTable, needsTable } from "../../mapping.js";
 import { prefillGrid } from "./ecu-prefill.js";
+import { startGrid } from "./setup.js";
 import { channels, selectedEstimators } from "./state.js";
 
 /** Show the grid editor when a chosen estimator needs a table; a new one per dataset. */
@@ -15,8 +16,14 @@ export function renderTable(view) {
   view.hosts.tableSection.hidden = !show;
   if (!show) return;
   const chans = channels(view);
-  const wanted = state.axes.length ? state.axes : guessTable(chans).axes;
-  if (state.grid && state.grid.datasetId === state.datasetId) return state.grid.redraw();
+  // The scenario's (or a reused run's) grid, else axes guessed from the channel names.
+  const start = startGrid(view, selectedEstimators(view));
+  const wanted = state.axes.length
+    ? state.axes
+    : (start?.axes.map((a) => a.name) ?? guessTable(chans).axes);
+  const startKey = start ? JSON.stringify(start.axes) : "";
+  if (state.grid && state.grid.datasetId === state.datasetId && state.grid.startKey === startKey)
+    return state.grid.redraw();
   state.grid?.destroy();
   const savedAxes = draft?.grid?.axes?.map((a) => a.name);
   // A column just picked for an ECU axis, else the draft of a reload, else the ECU's map.
@@ -29,10 +36,19 @@ export function renderTable(view) {
     )
       ? prefill
       : null;
+  const fromStart =
+    start &&
+    sameNames(
+      start.axes.map((a) => a.name),
+      wanted,
+    )
+      ? start
+      : null;
   const saved =
     (view.ecu?.pending && fromEcu) ||
     (draft?.grid && sameNames(savedAxes, wanted) ? draft.grid : null) ||
-    fromEcu;
+    fromEcu ||
+    fromStart;
   if (view.ecu) view.ecu.pending = null;
   if (draft) draft.grid = null;
   const g = gridEditor({
@@ -47,6 +63,7 @@ export function renderTable(view) {
     },
   });
   g.datasetId = state.datasetId;
+  g.startKey = startKey;
   state.grid = g;
   view.hosts.table.replaceChildren(g.el);
   return undefined;

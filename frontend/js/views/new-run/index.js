@@ -43,9 +43,12 @@ export async function mount(root, ctx) {
     scenarios().catch(() => []),
   ]);
   const state = initialState(ctx.query, catalog, datasets);
+  // "Run again…" (/runs/new?from=RUN_ID): that run's dataset, estimator, signals, grid and
+  // configuration fill the form (setup.js), ready to change.
+  const fromRun = await runToReuse(ctx, state, catalog);
   // The draft of this form from before a reload (same dataset only); each part is used once.
-  const draft = takeDraft(state);
-  const view = { ctx, catalog, datasets, baseMaps, scenarioList, state, draft };
+  const draft = fromRun ? null : takeDraft(state);
+  const view = { ctx, catalog, datasets, baseMaps, scenarioList, state, draft, fromRun };
   // "Adapt this map" of the ECU view: the table comes from the A2L (ecu-prefill.js).
   view.ecu = ecuFromQuery(ctx.query);
   view.renderAll = () => renderAll(view);
@@ -102,6 +105,20 @@ export async function mount(root, ctx) {
     view.drafts.stop();
     state.grid?.destroy();
   };
+}
+
+/** The run of ?from=RUN_ID, its choices put into the state; null without (or if it is gone). */
+async function runToReuse(ctx, state, catalog) {
+  const id = Number(ctx.query.get("from"));
+  if (!Number.isInteger(id) || id < 1) return null;
+  const run = await api.get(`/api/runs/${id}`, { signal: ctx.signal }).catch(() => null);
+  if (!run || !catalog.some((e) => e.name === run.estimator)) return null;
+  state.datasetId = run.dataset_id;
+  state.mode = "single";
+  state.chosen = new Set([run.estimator]);
+  state.signals = { ...(run.signals ?? {}) };
+  state.axes = (run.table?.axes ?? []).map((a) => a.name);
+  return run;
 }
 
 /** A numbered section card of the form. */
@@ -230,6 +247,8 @@ function syncUrl(view) {
   const axes = state.grid ? state.grid.snapshot().axes.map((a) => a.name) : state.axes;
   if (axes.length) query.axes = axes.join(",");
   if (state.mode !== "single") query.mode = state.mode;
+  if (view.fromRun) query.from = view.fromRun.id;
+  if (!state.useSetup) query.setup = "off";
   if (view.ecu) Object.assign(query, { ecu: view.ecu.ecuId, map: view.ecu.map });
   if (state.mode === "batch" && state.batch.size) {
     query.datasets = [...state.batch].sort((a, b) => a - b).join(",");

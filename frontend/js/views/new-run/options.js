@@ -54,8 +54,25 @@ export function runOptions(view) {
   cadence.addEventListener("change", () => {
     cadenceN.hidden = !cadence.value;
   });
-  const gates = gatesEditor(view, draft?.gates ?? []);
-  if (draft) {
+  // "Run again…": the reused run's options (setup.js), else the draft of a reload.
+  const again = view.fromRun?.config ?? null;
+  const gates = gatesEditor(view, again?.gates ?? draft?.gates ?? []);
+  if (again) {
+    const paceValue = again.pace === undefined || again.pace === null ? "max" : String(again.pace);
+    if (PACES.some((p) => p.value === paceValue)) pace.value = paceValue;
+    else {
+      pace.value = "custom";
+      paceCustom.value = paceValue;
+    }
+    const [unit, n] = Object.entries(again.version_every ?? {})[0] ?? [];
+    if (unit === "seconds" || unit === "samples") {
+      cadence.value = unit;
+      cadenceN.value = String(n);
+    }
+    paceCustom.hidden = pace.value !== "custom";
+    cadenceN.hidden = !cadence.value;
+  }
+  if (draft && !again) {
     runName.value = draft.options?.["run-name"] ?? "";
     const restore = [
       [pace, "run-pace"],

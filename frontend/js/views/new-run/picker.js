@@ -7,11 +7,15 @@ import { api } from "../../api.js";
 import { fmt, fmtDuration, fmtInt, h, withUnit } from "../../dom.js";
 import { guessColumn, guessTable, KIND_TITLES, rolesOf } from "../../mapping.js";
 import { loadTemplate } from "./ecu-prefill.js";
+import { applies, fetchSetup, renderSetupToggle, startSignal } from "./setup.js";
 import { channels, selectedEstimators } from "./state.js";
 
 /* ---------- 1. dataset ---------- */
 
-/** The dataset select; picking another dataset starts its signals and axes afresh. */
+/**
+ * The dataset select; picking another dataset starts its signals and axes afresh, and unticks
+ * the estimators its scenario does not apply to.
+ */
 export function datasetPicker(view) {
   const { state } = view;
   const select = h(
@@ -26,15 +30,25 @@ export function datasetPicker(view) {
     ),
   );
   const info = h("div", { class: "help" });
+  const setupHost = h("div", { "data-setup-host": "" });
   const label = h("label", { for: "run-dataset" }, "Dataset");
   select.addEventListener("change", async () => {
     state.datasetId = Number(select.value);
     state.signals = {};
     state.axes = [];
+    state.useSetup = true;
+    view.fromRun = null;
+    state.switched = true;
     await loadDataset(view);
     view.syncUrl();
   });
-  return { el: h("div", { class: "field" }, label, select, info), label, info };
+  return {
+    el: h("div", {}, h("div", { class: "field" }, label, select, info), setupHost),
+    label,
+    info,
+    setupHost,
+    select,
+  };
 }
 
 /**
@@ -55,10 +69,23 @@ export async function loadDataset(view) {
     .get(`/api/datasets/${d.id}/preview`, { query: { points: 400 }, signal: ctx.signal })
     .catch(() => null);
   await loadTemplate(view);
+  await fetchSetup(view);
+  if (state.switched) {
+    // Another dataset: keep only the estimators its scenario applies to (none kept for an
+    // uploaded log after a simulated one: the suggestion below starts afresh).
+    state.switched = false;
+    state.chosen = new Set(
+      [...state.chosen].filter((n) => applies(view, n) && (d.scenario || !view.lastScenario)),
+    );
+  }
+  view.lastScenario = d.scenario ?? null;
+  renderSetupToggle(view);
   if (!state.chosen.size) {
     const first =
       suggestedFor(view, d).find((n) => view.catalog.some((e) => e.name === n)) ??
-      (view.catalog.some((e) => e.name === "skf") ? "skf" : view.catalog[0]?.name);
+      (view.catalog.some((e) => e.name === "skf") && applies(view, "skf") ? "skf" : null) ??
+      firstApplying(view) ??
+      view.catalog[0]?.name;
     if (first) state.chosen.add(first);
   }
   state.loading = false;
@@ -69,6 +96,11 @@ export async function loadDataset(view) {
 /** The estimators the dataset's scenario suggests (none for an uploaded log). */
 function suggestedFor(view, dataset) {
   return view.scenarioList.find((s) => s.name === dataset?.scenario)?.estimators ?? [];
+}
+
+/** The first estimator of the catalog the dataset's scenario applies to, else null. */
+function firstApplying(view) {
+  return view.catalog.find((e) => applies(view, e.name))?.name ?? null;
 }
 
 /* ---------- 2. estimators ---------- */
@@ -108,6 +140,7 @@ export function renderEstimators(view) {
 
 function estimatorChoice(view, e, suggested) {
   const { state } = view;
+  const fits = applies(view, e.name);
   const onchange = (ev) => {
     // A sweep or batch runs one estimator: the boxes become radio buttons.
     if (state.mode !== "single") state.chosen = new Set([e.name]);
@@ -121,7 +154,7 @@ function estimatorChoice(view, e, suggested) {
     {
       class: `est${suggested.has(e.name) ? " suggested" : ""}`,
       for: `est-${e.name}`,
-      dataset: { estimator: e.name },
+      dataset: { estimator: e.name, applies: String(fits) },
     },
     h("input", {
       type: state.mode === "single" ? "checkbox" : "radio",
@@ -134,6 +167,7 @@ function estimatorChoice(view, e, suggested) {
     h("div", { class: "t" }, e.title ?? e.name, h("code", { class: "tag" }, e.name)),
     h("div", { class: "d" }, e.description),
     e.paper ? h("div", { class: "p", title: e.paper }, shortPaper(e.paper)) : null,
+    fits ? null : h("div", { class: "help" }, `Not for ${state.setup?.scenario ?? "this"} data.`),
   );
 }
 
@@ -152,7 +186,10 @@ export function renderSignals(view) {
   const taken = new Set();
   const guessY = guessTable(chans).y;
   const fields = [...roles.values()].map((r) => {
-    let chosen = state.signals[r.role] ?? (r.role === "y" ? guessY : guessColumn(r, chans, taken));
+    let chosen =
+      state.signals[r.role] ??
+      startSignal(view, ests, r.role) ??
+      (r.role === "y" ? guessY : guessColumn(r, chans, taken));
     if (!chans.some((c) => c.name === chosen)) chosen = guessColumn(r, chans, taken);
     if (chosen) taken.add(chosen);
     state.signals[r.role] = chosen;

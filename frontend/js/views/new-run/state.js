@@ -36,6 +36,10 @@ export function initialState(q, catalog, datasets) {
     forms: new Map(),
     grid: null,
     tab: null,
+    // The dataset's scenario setup (setup.js) and whether the form starts from it.
+    setup: null,
+    useSetup: q.get("setup") !== "off",
+    switched: false,
   };
 }
 

@@ -15,10 +15,12 @@ import { EVT, RUN_ACTIVE, RUN_DONE } from "../../constants.js";
 import { card, h, toast } from "../../dom.js";
 import { LiveStream } from "../../live.js";
 import { poll } from "../../poll.js";
+import { runEdit } from "./edit.js";
 import { startRenderLoop } from "./frames.js";
 import { runMaps, runTimeline } from "./maps.js";
 import { runMeta } from "./meta.js";
 import { runSeries } from "./series.js";
+import { mapQuantity } from "./trust-maps.js";
 import { applyDelta, applyFull, applyRun, applyStatus, runState } from "./state.js";
 
 export const title = "Run";
@@ -52,9 +54,14 @@ export async function mount(root, ctx) {
   ]);
   window.dispatchEvent(new CustomEvent(EVT.currentRun, { detail: run }));
 
-  const outputName = run.signals?.y ?? run.config?.output ?? "value";
+  // Map observers have no output column: their map quantity names the values (trust-maps.js).
+  const quantity = mapQuantity(run);
+  const outputName = run.signals?.y ?? run.config?.output ?? quantity?.name ?? "value";
   const outputUnit =
-    dataset?.channels?.find((c) => c.name === outputName)?.unit ?? run.config?.output_unit ?? "";
+    dataset?.channels?.find((c) => c.name === outputName)?.unit ??
+    run.config?.output_unit ??
+    quantity?.unit ??
+    "";
   const v = {
     id,
     ctx,
@@ -63,7 +70,9 @@ export async function mount(root, ctx) {
     est,
     dataset,
     producesMap,
-    isTorque: est.kind === "torque" || !producesMap,
+    // Torque views (θ̂, running ISE, the 5–30 s scoring window) are the torque estimators'
+    // alone: the joint EKF without a map plots its own estimate against the truth.
+    isTorque: est.kind === "torque",
     outputName,
     outputUnit,
     s: runState(run, dataset),
@@ -114,9 +123,11 @@ export async function mount(root, ctx) {
   v.meta = runMeta(v, { onCancel: act("cancel"), onResume: act("resume", () => restartStream()) });
   root.append(...v.meta.els);
   v.maps = runMaps(v, preview);
+  v.maps.loadTruth(ctx.signal);
   v.timeline = runTimeline(v);
   v.series = runSeries(v);
   root.append(h("div", { class: "stack", style: { marginTop: "16px" } }, layout(v)));
+  if (producesMap) v.edit = runEdit(v); // its card goes under the versions timeline
 
   /* ---------- stream ---------- */
   const onFull = (msg) => {
@@ -190,6 +201,7 @@ function layout(v) {
   if (v.producesMap) {
     body.push(
       h("div", { class: "grid cols-2" }, maps.mapCard(timeline.note), maps.varCard),
+      h("div", { class: "grid cols-2", "data-trust-maps": "" }, maps.hitsCard, maps.errorCard),
       card({
         title: "Versions",
         hint: "scrub or play the map's evolution",
@@ -198,12 +210,13 @@ function layout(v) {
       }),
     );
   }
-  const rejected = card({ title: "Rejected samples", hint: "by gate", body: meta.gates });
+  const rejected = card({ title: "Rejected samples", hint: "by reason", body: meta.gates });
   body.push(
     h(
       "div",
       { class: isTorque ? "stack" : "grid side" },
       series.seriesCard,
+      isTorque ? h("div", { class: "grid cols-2" }, series.thetaCard, series.iseCard) : null,
       h(
         "div",
         { class: "stack" },

@@ -7,9 +7,10 @@
 import { RUN_ACTIVE, SEL, STORAGE } from "../../constants.js";
 import { card, flatten, h, icon, ICONS, withUnit } from "../../dom.js";
 import { niceRange } from "../../grid-math.js";
-import { MapPlot, SliceGroup } from "../../map-plot.js";
+import { MapPlot, SliceGroup, squared } from "../../map-plot.js";
 import { hasWebGL } from "../../plot.js";
 import { VersionTimeline } from "../../timeline.js";
+import { trustLegend, trustMaps, trustOverlay } from "./trust-maps.js";
 
 /**
  * The map and variance plots of the run, with a fixed colour range (see runRange).
@@ -38,6 +39,10 @@ export function runMaps(v, preview) {
   const mapPlot = new MapPlot(mapEl, { kind: "value", mode: mapMode, ...common });
   const varPlot = new MapPlot(varEl, { kind: "variance", ...common });
   mapPlot.setRange(runRange(v.run, preview));
+  // Trust (trust-maps.js): unvisited and filled cells over the map, hits and error maps.
+  mapPlot.overlay = trustOverlay;
+  mapPlot.barLabel = outputName;
+  const trust = trustMaps(v, { slices });
   const modeButtons = ["heatmap", "surface"].map((m) =>
     h(
       "button",
@@ -60,7 +65,7 @@ export function runMaps(v, preview) {
   );
   const varCard = card({
     title: "Variance",
-    hint: "diag P, log colour scale",
+    hint: `diag P [${squared(outputUnit || "-")}], log colour scale`,
     body: varEl,
     bodyCls: "tight",
   });
@@ -69,10 +74,15 @@ export function runMaps(v, preview) {
     h("div", { class: "seg", role: "group", "aria-label": "Map display" }, modeButtons),
   ];
 
-  function draw(frame, { variance = true, map = true } = {}) {
-    if (!v.producesMap || !frame.axes || !frame.values) return;
+  function draw(rawFrame, { variance = true, map = true } = {}) {
+    if (!v.producesMap || !rawFrame.axes || !rawFrame.values) return;
+    const frame = { ...rawFrame, cellState: trust.states(rawFrame) };
+    self.lastFrame = frame;
     if (map) mapPlot.render(frame);
     if (!variance) return;
+    trust.draw(frame);
+    // Observers without a covariance show the hits in the second map already (below).
+    trust.hitsCard.hidden = Boolean(frame.visits && !frame.variances);
     if (frame.variances) varPlot.render(frame);
     else if (frame.visits) {
       // Observers without a covariance (LPV): the second map shows where the log has been.
@@ -91,35 +101,44 @@ export function runMaps(v, preview) {
     }
   }
 
-  return {
+  const self = {
     /** The map card, its actions: the timeline's "viewing version" note and the mode switch. */
     mapCard: (note) =>
       card({
         title: "Map",
-        hint: withUnit(outputName, outputUnit),
+        hint: withUnit(outputName, outputUnit || "-"),
         actions: mapActions(note),
-        body: mapEl,
+        body: [mapEl, trustLegend()],
         bodyCls: "tight",
       }),
     varCard,
+    /** The hits per cell and, on a simulated dataset, the error against the truth. */
+    hitsCard: trust.hitsCard,
+    errorCard: trust.errorCard,
+    loadTruth: trust.loadTruth,
+    lastFrame: null,
     draw,
     destroy: () => {
       mapPlot.destroy();
       varPlot.destroy();
+      trust.destroy();
     },
   };
+  return self;
 }
 
 /**
- * The versions timeline: scrubbing shows a stored version (in the URL as ?version=), "live"
- * returns to the stream; the list of versions updates the metric cards and Versions link.
+ * The versions timeline: scrubbing shows a stored version (in the URL as ?version=N, N its
+ * number 1…n in the run; an old link's ?version_id=ID still opens it), "live" returns to the
+ * stream; the list of versions updates the metric cards and Versions link.
  */
 export function runTimeline(v) {
   const { id, ctx, s } = v;
   return new VersionTimeline({
     runId: id,
-    initialVersion: Number(ctx.query.get("version")) || null,
-    onScrub: (version) => ctx.setQuery({ version: version?.id }),
+    initialVersion: ctx.query.get("version"),
+    initialVersionId: ctx.query.get("version_id"),
+    onScrub: (version) => ctx.setQuery({ version: version?.number }),
     isLive: () => RUN_ACTIVE.has(s.run.status),
     onShow: (doc, _version, { quiet }) =>
       v.maps.draw({
@@ -127,6 +146,7 @@ export function runTimeline(v) {
         values: doc.values,
         variances: doc.variances,
         visits: doc.visits,
+        cellRejections: doc.cell_rejections ?? null,
         trail: quiet ? s.trail : null,
         activeCell: null,
       }),
@@ -137,7 +157,7 @@ export function runTimeline(v) {
       v.meta.linkVersions(versions);
       v.meta.renderMetrics();
     },
-    baseMapName: () => `${s.run.name || s.run.estimator} #${id}`,
+    baseMapName: () => s.run.name || `run ${id}`,
   });
 }
 

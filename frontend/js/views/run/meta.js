@@ -13,11 +13,11 @@ import {
   h,
   icon,
   ICONS,
-  metricLabel,
   pageHead,
   statusBadge,
 } from "../../dom.js";
 import { exportMenu } from "../../export-menu.js";
+import { metricFormula, metricNameNode } from "../../metric-names.js";
 import { SCOPE } from "../../scopes.js";
 
 /** Metrics shown by cards of their own (or not at all). */
@@ -80,6 +80,7 @@ export function runMeta(v, { onCancel, onResume }) {
     errorHost: v.root,
     signal: v.ctx.signal,
     calibration: run.calibration ?? run.table?.calibration ?? null,
+    producesMap: v.producesMap,
   });
   const versionsLink = h(
     "a",
@@ -92,6 +93,13 @@ export function runMeta(v, { onCancel, onResume }) {
     { class: "button", href: `/compare?runs=${id}` },
     icon(ICONS.compare),
     "Compare",
+  );
+  // "Run again…": New run filled with this run's dataset, estimator, signals, grid and config.
+  const againLink = h(
+    "a",
+    { class: "button", href: `/runs/new?from=${id}`, "data-run-again": "" },
+    icon(ICONS.play),
+    "Run again…",
   );
   const errorBanner = h("div", {
     class: "banner error",
@@ -118,7 +126,14 @@ export function runMeta(v, { onCancel, onResume }) {
         : null,
       conn,
     ),
-    actions: [cancelBtn, resumeBtn, compareLink, v.producesMap ? versionsLink : null, exportEl],
+    actions: [
+      cancelBtn,
+      resumeBtn,
+      againLink,
+      compareLink,
+      v.producesMap ? versionsLink : null,
+      exportEl,
+    ],
   });
 
   function renderProgress() {
@@ -172,10 +187,10 @@ export function runMeta(v, { onCancel, onResume }) {
     renderGates();
   }
 
-  /** The Versions button opens the first and last version side by side. */
+  /** The Versions button opens the first and last version (by number in the run) side by side. */
   function linkVersions(versions) {
     versionsLink.href = versions.length
-      ? `/versions?a=${id}:${versions[0].id}&b=${id}:${versions.at(-1).id}`
+      ? `/versions?a=${id}:${versions[0].number ?? 1}&b=${id}:${versions.at(-1).number ?? versions.length}`
       : `/versions?a=${id}`;
   }
 
@@ -202,17 +217,19 @@ function metricCards(v) {
   const metric = (k, value, unit = "", detail = "") =>
     h(
       "div",
-      { class: "metric", dataset: { metric: k } },
-      h("div", { class: "k" }, metricLabel(k)),
+      { class: "metric", dataset: { metric: k }, title: metricFormula(k, s.metrics) || null },
+      h("div", { class: "k" }, metricNameNode(k)),
       h("div", { class: "v" }, value, unit ? h("span", { class: "u" }, unit) : null),
       detail ? h("div", { class: "d" }, detail) : null,
     );
   const torqueUnit = s.series.pick("estimate")?.unit || "N·m";
   const unitOf = (k) => {
     if (isTorque && (k === "mae" || k === "sd")) return torqueUnit;
+    if (isTorque && k === "ise") return torqueUnit === "N·m" ? "N²·m²·s" : `(${torqueUnit})²·s`;
     if (k === "coverage") return "";
     if (/rmse|max_abs|^holdout:.*mae$|^nis:innovation_mean$/.test(k)) {
-      return isTorque ? torqueUnit : outputUnit;
+      // An observer without an output channel (the joint EKF) scores its own estimate.
+      return isTorque ? torqueUnit : outputUnit || s.series.pick("estimate")?.unit || "";
     }
     return "";
   };
@@ -247,36 +264,73 @@ function metricCards(v) {
   return cards;
 }
 
-/** Samples rejected per gate, most first, each with its share of the samples as a bar. */
+/**
+ * Samples rejected, by reason, so the rows add up: the estimator's reasons (one status per
+ * sample, most first) sum to the total; the sample gates' row is split per gate (in the
+ * run's gate order), a sample failing several gates counted once, under the first.
+ */
 function renderRejected(host, s) {
-  const entries = Object.entries(s.run.rejected ?? {});
-  if (!entries.length) {
+  const rejected = s.run.rejected ?? {};
+  const entries = Object.entries(rejected);
+  const none = !entries.some(([k, n]) => n > 0 || k.startsWith("gate:"));
+  if (none) {
     host.replaceChildren(h("p", { class: "help", style: { margin: 0 } }, "No samples rejected."));
     return;
   }
-  const total = Math.max(1, s.sample || s.nSamples || 1);
-  host.replaceChildren(
-    ...entries
-      .sort((a, b) => b[1] - a[1])
-      .map(([gate, n]) =>
-        h(
-          "div",
-          { class: "gate", dataset: { gate } },
-          h("span", {}, gateLabel(gate)),
-          h("b", {}, fmtInt(n)),
-          h(
-            "div",
-            { class: "bar", title: `${fmt((100 * n) / total, 3)} % of samples` },
-            h("span", { style: { width: `${Math.min(100, (100 * n) / total)}%` } }),
-          ),
-        ),
+  const samples = Math.max(1, s.sample || s.nSamples || 1);
+  const gates = entries.filter(([k]) => k.startsWith("gate:"));
+  const own = entries.filter(([k]) => !k.startsWith("gate:"));
+  const split = own.some(([k]) => k === "mask") && gates.length > 0;
+  const row = (key, n, { sub = false, title = "" } = {}) =>
+    h(
+      "div",
+      { class: `gate${sub ? " sub" : ""}`, dataset: { gate: key }, title: title || null },
+      h("span", {}, gateLabel(key)),
+      h("b", {}, fmtInt(n)),
+      h(
+        "div",
+        { class: "bar", title: `${fmt((100 * n) / samples, 3)} % of samples` },
+        h("span", { style: { width: `${Math.min(100, (100 * n) / samples)}%` } }),
       ),
+    );
+  const firstGate = !gates.length
+    ? ""
+    : "A sample that fails several gates is counted once, under the first of them in the " +
+      "run's gate list" +
+      (rejected.delay
+        ? "; with a sensor delay, a step is gated when its measurement or its operating-point " +
+          "sample is."
+        : ".");
+  const rows = [];
+  const top = split ? own : [...own, ...gates];
+  for (const [key, n] of top.sort((a, b) => b[1] - a[1])) {
+    if (!n && !(key === "mask" && split) && !key.startsWith("gate:")) continue;
+    const isGate = key.startsWith("gate:") || key === "mask";
+    rows.push(row(key, n, { title: isGate ? firstGate : "" }));
+    if (key !== "mask" || !split) continue;
+    for (const [gate, m] of gates) rows.push(row(gate, m, { sub: true, title: firstGate }));
+    const rest = n - gates.reduce((a, [, m]) => a + m, 0);
+    if (rest > 0) rows.push(row("other", rest, { sub: true, title: "Masked; no gate claims it." }));
+  }
+  rows.push(
+    h(
+      "div",
+      {
+        class: "gate total",
+        dataset: { gate: "total" },
+        title: `The sum of the reasons above (each sample counted once). ${firstGate}`.trim(),
+      },
+      h("span", {}, "Total rejected"),
+      h("b", {}, fmtInt(rejectedTotal(rejected))),
+    ),
   );
+  host.replaceChildren(...rows);
 }
 
 /**
- * Samples rejected in all: the accept mask (every service gate together), the innovation gate
- * and the samples before the sensor delay is filled; per-gate counts overlap within the mask.
+ * Samples rejected in all: the estimator's reasons (the accept mask of every sample gate
+ * together, the innovation gate, the samples before the sensor delay is filled), which are
+ * disjoint; the per-gate counts split the mask. Without a mask count, the gates' sum.
  */
 function rejectedTotal(rejected) {
   const keys = Object.keys(rejected);
@@ -288,7 +342,7 @@ function gateLabel(key) {
   const m = /^gate:([^:]+):(.+)$/.exec(key);
   if (m) return `${m[1]} gate · ${m[2]}`;
   const named = {
-    mask: "all sample gates",
+    mask: "sample gates",
     innovation: "innovation gate",
     delay: "before the sensor delay",
   };

@@ -7,9 +7,12 @@ import { SEL } from "../../constants.js";
 import { card, h, quantile, withUnit } from "../../dom.js";
 import { axis, baseLayout, purge, react, SERIES_COLORS, theme } from "../../plot.js";
 import { decimate } from "../../series.js";
+import { torqueViews, windowShape } from "./torque.js";
 
 /** Points per drawn line (min/max per bucket): a 1000-px-wide plot shows no more. */
 const LINE_POINTS = 1200;
+/** The legend name of the rejected samples' markers (what tests look for). */
+export const REJECTED_TRACE = "rejected (gates)";
 
 /** The series and PE cards; draw() redraws both from `v.s.series`. */
 export function runSeries(v) {
@@ -41,6 +44,8 @@ export function runSeries(v) {
     body: seriesEl,
     bodyCls: "tight",
   });
+  // Torque estimators: θ̂ (adaptive laws), running ISE, the scoring window (torque.js).
+  const torque = isTorque ? torqueViews(v) : null;
   const setTitle = (text, hint) => {
     const h2 = seriesCard.querySelector(SEL.cardTitle);
     if (h2.firstChild.textContent !== text)
@@ -52,7 +57,10 @@ export function runSeries(v) {
     if (!data.length) return;
     // Start-up transients (an observer settling) would flatten the rest: frame the bulk.
     const topRange = robustRange(data.filter((d) => d.yaxis !== "y2").flatMap((d) => d.y));
-    const bottomRange = robustRange(data.filter((d) => d.yaxis === "y2").flatMap((d) => d.y));
+    // The rejection markers sit on zero: they say when, not how much.
+    const bottomRange = robustRange(
+      data.filter((d) => d.yaxis === "y2" && d.mode === "lines").flatMap((d) => d.y),
+    );
     react(
       seriesEl,
       data,
@@ -65,6 +73,7 @@ export function runSeries(v) {
           ...(bottomRange ? { range: bottomRange } : {}),
         }),
         margin: { l: 62, r: 12, t: 26, b: 40 },
+        ...(torque ? { shapes: windowShape(torque.window()) } : {}),
       }),
     );
   }
@@ -88,13 +97,18 @@ export function runSeries(v) {
   return {
     seriesCard,
     peCard,
+    /** Torque estimators' θ̂ and running-ISE cards (null for the others). */
+    thetaCard: torque?.thetaCard ?? null,
+    iseCard: torque?.iseCard ?? null,
     draw: () => {
       drawSeries();
       drawPe();
+      torque?.draw(torque.window());
     },
     destroy: () => {
       purge(seriesEl);
       purge(peEl);
+      torque?.destroy();
     },
   };
 }
@@ -115,6 +129,8 @@ function traces(v, setTitle) {
     if (te) data.push(line(te, `estimated ${what}`, SERIES_COLORS[0], { width: 1.2 }));
     if (tt) data.push(line(tt, `true ${what}`, t.text, { width: 1.8 }));
     if (er) data.push({ ...line(er, "error", t.danger), yaxis: "y2" });
+    const rj = rejectedMarkers(s.series, t.danger);
+    if (rj) data.push(rj);
     if (!isTorque) setTitle(`${what}: estimated vs true`, "error (true − estimated) below");
     return {
       data,
@@ -128,10 +144,36 @@ function traces(v, setTitle) {
   if (me) data.push(line(me, "measured", t.text3, { width: 1.2 }));
   if (pr) data.push(line(pr, "predicted", SERIES_COLORS[0]));
   if (re) data.push({ ...line(re, "residual", SERIES_COLORS[1]), yaxis: "y2" });
+  const rj = rejectedMarkers(s.series, t.danger);
+  if (rj) data.push(rj);
   return {
     data,
     top: withUnit(outputName, (me ?? pr)?.unit ?? outputUnit),
     bottom: withUnit("residual", re?.unit ?? outputUnit),
+  };
+}
+
+/**
+ * Red × on the lower plot's zero line at the rejected samples' times, from the "rejected"
+ * series (app/runs/results.py rejection_mask: 1 rejected, 0 accepted; min/max-decimated, so
+ * every bucket holding a rejection keeps a 1). Thinned the same way to LINE_POINTS; null
+ * when nothing was rejected.
+ */
+function rejectedMarkers(store, color) {
+  const mask = store.data.rejected;
+  if (!mask?.values?.length) return null;
+  const { x, y } = decimate(mask.time, mask.values, LINE_POINTS);
+  const times = x.filter((_, k) => y[k] !== null && y[k] >= 0.5);
+  if (!times.length) return null;
+  return {
+    type: "scatter",
+    mode: "markers",
+    x: times,
+    y: times.map(() => 0),
+    yaxis: "y2",
+    name: REJECTED_TRACE,
+    marker: { symbol: "x-thin", size: 7, color, line: { color, width: 1.5 } },
+    hovertemplate: `rejected sample<br>t = %{x:.3f} s<extra></extra>`,
   };
 }
 
@@ -149,7 +191,7 @@ function line(series, name, color, { width = 1.5, dash = "solid" } = {}) {
 }
 
 /** The 0.5–99.5 % span of the values, padded, or null when it adds nothing to autorange. */
-function robustRange(values) {
+export function robustRange(values) {
   const finite = values.filter((x) => x !== null && Number.isFinite(x));
   if (finite.length < 50) return null;
   const lo = quantile(finite, 0.005);
