@@ -116,10 +116,12 @@ class Scenario:
         ``noise_scale``: factor on every sensor noise σ of the log, in [0, 100] (the
         estimators' σ settings are not scaled). ``transient_24s``: ``torque-si`` only, TQ
         §VI's transient at 24 s."""
-        if duration_s is not None and not 0 < duration_s <= self.duration_s:
+        # At least one sample interval (two samples), as the REST schema states per scenario.
+        shortest = 1.0 / self.rate_hz
+        if duration_s is not None and not shortest <= duration_s <= self.duration_s:
             raise ConfigError(
-                f"duration must be in (0, {self.duration_s:g}] s for {self.name!r}, "
-                f"got {duration_s:g}"
+                f"duration must be in [{shortest:g}, {self.duration_s:g}] s for "
+                f"{self.name!r}, got {duration_s:g}"
             )
         level = check_level(mismatch)
         if averaging is not None:

@@ -23,7 +23,7 @@ import numpy as np
 from app.db.engine import Database
 from app.db.repositories import DatasetRepo, RunRepo, VersionRepo
 from app.domain import Run
-from app.errors import ConflictError, NotFoundError
+from app.errors import NotFoundError
 from app.io.payload import unpack_truth
 from estimation.table import Axis, Table
 
@@ -35,21 +35,24 @@ MAP_QUANTITY = {"lpv": ("maf_error_kg_s", "kg/s"), "ekf-map": ("maf_q", "-")}
 
 @dataclass(frozen=True, slots=True)
 class TruthOnGrid:
-    """The true map on the run's grid: ``values`` shaped like the run's table."""
+    """The true map on the run's grid: ``values`` shaped like the run's table, or ``None``
+    with the ``reason`` when the run's grid is not over the true map's inputs."""
 
     axes: list[dict[str, Any]]
-    values: np.ndarray
+    values: np.ndarray | None
     name: str
     unit: str
     exact: bool
+    reason: str | None = None
 
 
 def truth_on_grid(db: Database, run_id: int) -> TruthOnGrid:
     """The true map of run ``run_id``'s simulated dataset on the run's grid.
 
     404 (field ``run_id``) when the run does not exist, its dataset has no truth or the truth
-    has no map (torque, a log); 409 when the run has no grid or its grid reads other inputs
-    than the true map.
+    has no map (torque, a log). A run without a grid, or whose grid reads other inputs than
+    the true map, has no true map to compare with: ``values`` is ``None`` and ``reason`` says
+    why (an answer, not an error: the run view asks for every simulated map run).
     """
     with db.read() as s:
         run = RunRepo(s).get(run_id)
@@ -66,19 +69,23 @@ def truth_on_grid(db: Database, run_id: int) -> TruthOnGrid:
     true_map = truth.true_map
     if true_map is None:
         raise NotFoundError(f"run {run_id}'s dataset has a truth but no true map", field="run_id")
+    name, unit = map_quantity(run)
+    if not unit and truth.map_output:
+        unit = dataset.unit_of(truth.map_output)
+    name = name or truth.map_output or "value"
     axes = _grid_axes(run, None if latest is None else latest.axes)
     if not axes:
-        raise ConflictError(f"run {run_id} has no map grid", field="run_id")
+        return TruthOnGrid([], None, name, unit, False, f"run {run_id} has no map grid")
     inputs = list(truth.map_inputs)
     if len(inputs) != true_map.ndim:
         inputs = [a.name for a in true_map.axes]
     grid = [Axis.from_dict(a) for a in axes]
     if len(grid) != len(inputs) or any(a.name not in inputs for a in grid):
-        raise ConflictError(
+        reason = (
             f"run {run_id}'s grid reads {[a.name for a in grid]}, the true map {inputs}: "
-            "no true map on this grid",
-            field="run_id",
+            "no true map on this grid"
         )
+        return TruthOnGrid(axes, None, name, unit, False, reason)
     order = [inputs.index(a.name) for a in grid]  # the truth's axis of each run axis
     exact = all(
         np.array_equal(true_map.axes[k].breakpoints, a.breakpoints)
@@ -89,13 +96,10 @@ def truth_on_grid(db: Database, run_id: int) -> TruthOnGrid:
     for run_axis, truth_axis in enumerate(order):
         columns[truth_axis] = mesh[run_axis].ravel()
     values = Table(list(true_map.axes), true_map.values).evaluate(np.column_stack(columns))
-    name, unit = map_quantity(run)
-    if not unit and truth.map_output:
-        unit = dataset.unit_of(truth.map_output)
     return TruthOnGrid(
         axes=[a.to_dict() for a in grid],
         values=values.reshape(mesh[0].shape),
-        name=name or truth.map_output or "value",
+        name=name,
         unit=unit,
         exact=exact,
     )

@@ -55,10 +55,17 @@ def list_runs(
     offset: Offset = 0,
     dataset_id: Annotated[int | None, Query(ge=1, le=MAX_ID)] = None,
     status: RunStatus | None = None,
+    # No control characters: names never hold one, and PostgreSQL text cannot hold NUL (a
+    # query with one was a 500 there).
     q: Annotated[
-        str | None, Query(max_length=200, description="The name contains it (any case).")
+        str | None,
+        Query(
+            max_length=200,
+            pattern=r"^[^\x00-\x1f\x7f]*$",
+            description="The name contains it (any case); no control characters.",
+        ),
     ] = None,
-    estimator: Annotated[str | None, Query(max_length=64)] = None,
+    estimator: Annotated[str | None, Query(max_length=64, pattern=r"^[a-z0-9][a-z0-9-]*$")] = None,
     group: Annotated[
         int | None, Query(ge=1, le=MAX_ID, description="Only the runs of this sweep or batch.")
     ] = None,

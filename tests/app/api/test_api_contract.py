@@ -85,6 +85,20 @@ def test_dataset_names_are_kept_as_given(client: TestClient, name: str) -> None:
     assert client.get(f"/api/datasets/{response.json()['id']}").json()["name"] == name
 
 
+def test_a_simulation_shorter_than_one_sample_interval_is_refused(client: TestClient) -> None:
+    """The schema's per-scenario minimum (two samples) is what the service checks: skf-sim2
+    logs at 1 Hz, so 0.6 s is a 422 naming ``duration_s``, nothing stored."""
+    before = client.get("/api/datasets").json()["total"]
+    response = client.post(
+        "/api/datasets/simulate", json={"scenario": "skf-sim2", "duration_s": 0.6}
+    )
+    assert response.status_code == 422, response.text
+    assert response.json()["error"]["field"] == "duration_s"
+    assert client.get("/api/datasets").json()["total"] == before
+    ok = client.post("/api/datasets/simulate", json={"scenario": "skf-sim2", "duration_s": 1.0})
+    assert ok.status_code == 201, ok.text
+
+
 @pytest.mark.parametrize(
     ("name", "code_point"),
     [("a\u202eb", "U+202E"), ("\u200bx", "U+200B"), ("x\ufeff", "U+FEFF"), ("a\x9bb", "U+009B")],
