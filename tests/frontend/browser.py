@@ -21,6 +21,17 @@ VIEWPORT = {"width": 1400, "height": 900}
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE_CSV = ROOT / "app" / "data" / "example_nox.csv"
 ARTIFACTS = ROOT / "tests" / "artifacts"
+# ``page.evaluate(DROP_FILE, [text, name])``: drop a CSV file on the Datasets view's zone.
+DROP_FILE = """
+([text, name]) => {
+  const zone = document.querySelector(".dropzone");
+  const dt = new DataTransfer();
+  dt.items.add(new File([text], name, { type: "text/csv" }));
+  for (const type of ["dragenter", "dragover", "drop"]) {
+    zone.dispatchEvent(new DragEvent(type, { dataTransfer: dt, bubbles: true, cancelable: true }));
+  }
+}
+"""
 
 
 def start_server(workdir: Path) -> Server:

@@ -8,19 +8,8 @@ import uuid
 
 from playwright.sync_api import Page, expect
 
-from tests.frontend.browser import EXAMPLE_CSV, shot
+from tests.frontend.browser import DROP_FILE, EXAMPLE_CSV, shot
 from tests.frontend.conftest import Console
-
-DROP_FILE = """
-([text, name]) => {
-  const zone = document.querySelector(".dropzone");
-  const dt = new DataTransfer();
-  dt.items.add(new File([text], name, { type: "text/csv" }));
-  for (const type of ["dragenter", "dragover", "drop"]) {
-    zone.dispatchEvent(new DragEvent(type, { dataTransfer: dt, bubbles: true, cancelable: true }));
-  }
-}
-"""
 
 
 def test_drop_a_csv_see_its_channels_and_map_its_columns(page: Page, api) -> None:

@@ -11,19 +11,9 @@ import uuid
 import pytest
 from playwright.sync_api import Page, expect
 
-from tests.frontend.browser import shot, upload_example, wait_run
+from tests.frontend.browser import DROP_FILE, shot, upload_example, wait_run
 from tests.frontend.conftest import Console
 
-DROP_FILE = """
-([text, name]) => {
-  const zone = document.querySelector(".dropzone");
-  const dt = new DataTransfer();
-  dt.items.add(new File([text], name, { type: "text/csv" }));
-  for (const type of ["dragenter", "dragover", "drop"]) {
-    zone.dispatchEvent(new DragEvent(type, { dataTransfer: dt, bubbles: true, cancelable: true }));
-  }
-}
-"""
 SKF_CONFIG = {"theta0": 300, "p0": 1e4, "sigma_w": 5, "sigma_v": 50}
 GRID = {
     "axes": [

@@ -64,6 +64,17 @@ def wait_run(
         time.sleep(0.05)
 
 
+def wait_group(client: TestClient, path: str, timeout: float = 180.0) -> dict[str, Any]:
+    """A sweep's or batch's document (``path``) once every run in it has finished."""
+    deadline = time.monotonic() + timeout
+    while True:
+        doc = client.get(path).json()
+        if all(r["status"] in ("succeeded", "failed", "cancelled") for r in doc["runs"]):
+            return doc
+        assert time.monotonic() < deadline, doc["counts"]
+        time.sleep(0.1)
+
+
 def final_values(client: TestClient, run_id: int) -> dict[str, Any]:
     response = client.get(f"/api/runs/{run_id}/export", params={"format": "json"})
     assert response.status_code == 200, response.text

@@ -14,6 +14,7 @@ from tests.support.helpers import (
     log_csv,
     reference_run,
     upload_ok,
+    wait_group,
 )
 
 
@@ -29,18 +30,6 @@ def _sweep_body(dataset_id: int, **extra: object) -> dict:
     } | extra
 
 
-def _wait_group(client: TestClient, path: str) -> dict:
-    import time
-
-    deadline = time.monotonic() + 180
-    while True:
-        doc = client.get(path).json()
-        if all(r["status"] in ("succeeded", "failed", "cancelled") for r in doc["runs"]):
-            return doc
-        assert time.monotonic() < deadline, doc["counts"]
-        time.sleep(0.1)
-
-
 @pytest.mark.slow
 def test_a_grid_sweep_runs_every_point_and_ranks_them(client: TestClient, tmp_path) -> None:  # type: ignore[no-untyped-def]
     text = log_csv(2000, seed=60)
@@ -52,7 +41,7 @@ def test_a_grid_sweep_runs_every_point_and_ranks_them(client: TestClient, tmp_pa
     assert {tuple(sorted(r["params"].items())) for r in sweep["runs"]} == {
         (("sigma_v", v), ("sigma_w", w)) for w in (0.001, 0.01, 0.1) for v in (0.05, 0.5)
     }
-    done = _wait_group(client, f"/api/sweeps/{sweep['id']}")
+    done = wait_group(client, f"/api/sweeps/{sweep['id']}")
     assert done["counts"] == {"succeeded": 6}
     metrics = [r["metric"] for r in done["runs"]]
     assert metrics == sorted(metrics)  # best (lowest output RMSE) first
@@ -76,7 +65,7 @@ def test_a_random_sweep_is_seeded_and_bad_values_store_nothing(client: TestClien
         seed=7,
     )
     assert all(1e-3 <= p["sigma_w"] <= 1.0 for p in drawn)
-    _wait_group(client, f"/api/sweeps/{first['id']}")
+    wait_group(client, f"/api/sweeps/{first['id']}")
 
     before = client.get("/api/runs", params={"limit": 1}).json()["total"]
     bad = client.post(
@@ -109,7 +98,7 @@ def test_a_fleet_batch_merges_the_vehicles_maps(client: TestClient) -> None:
     assert response.status_code == 201, response.text
     batch = response.json()
     assert [r["dataset_id"] for r in batch["runs"]] == datasets
-    done = _wait_group(client, f"/api/batches/{batch['id']}")
+    done = wait_group(client, f"/api/batches/{batch['id']}")
     assert done["counts"] == {"succeeded": 4}
     agg = done["aggregate"]
     versions = []
