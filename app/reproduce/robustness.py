@@ -31,7 +31,7 @@ from plotly.subplots import make_subplots
 
 from app.reproduce import fidelity
 from app.reproduce.report import Figure, Section, Table, Text
-from estimation.errors import ConfigError
+from app.reproduce.runner import parse_choices
 
 
 @dataclass(frozen=True, slots=True)
@@ -67,14 +67,7 @@ def parse_parts(text: str | None) -> tuple[str, ...]:
     are an error naming the choices."""
     if text is None:
         return PARTS
-    wanted = [p.strip() for p in text.split(",") if p.strip()]
-    unknown = [w for w in wanted if w not in PARTS]
-    if unknown or not wanted:
-        raise ConfigError(
-            f"--robustness-parts: unknown part {', '.join(map(repr, unknown)) or repr(text)}; "
-            f"choose from {','.join(PARTS)}"
-        )
-    return tuple(p for p in PARTS if p in wanted)
+    return parse_choices(text, PARTS, "--robustness-parts", "part")
 
 
 def run(

@@ -101,16 +101,22 @@ def parse_seeds(text: str) -> tuple[int, ...]:
     return tuple(seeds)
 
 
-def parse_only(text: str) -> tuple[str, ...]:
-    """``"skf,torque"`` → the sections in report order; unknown names are an error."""
+def parse_choices(text: str, choices: Sequence[str], flag: str, what: str) -> tuple[str, ...]:
+    """``"a,b"`` → those of ``choices``, in their order; an unknown name or an empty list is
+    an error naming the ``flag``, the ``what`` and the choices."""
     wanted = [p.strip() for p in text.split(",") if p.strip()]
-    unknown = [w for w in wanted if w not in SECTION_KEYS]
+    unknown = [w for w in wanted if w not in choices]
     if unknown or not wanted:
         raise ConfigError(
-            f"--only: unknown section {', '.join(map(repr, unknown)) or repr(text)}; "
-            f"choose from {','.join(SECTION_KEYS)}"
+            f"{flag}: unknown {what} {', '.join(map(repr, unknown)) or repr(text)}; "
+            f"choose from {','.join(choices)}"
         )
-    return tuple(k for k in SECTION_KEYS if k in wanted)
+    return tuple(k for k in choices if k in wanted)
+
+
+def parse_only(text: str) -> tuple[str, ...]:
+    """``"skf,torque"`` → the sections in report order; unknown names are an error."""
+    return parse_choices(text, SECTION_KEYS, "--only", "section")
 
 
 def reproduce(
