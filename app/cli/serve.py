@@ -15,6 +15,12 @@ from app.cli.errors import UsageError
 from app.config import Settings
 from app.domain import DEFAULT_SCOPES, SCOPES
 
+#: Seconds an idle keep-alive connection stays open. Longer than what clients and proxies
+#: keep an idle connection for (httpx 5 s, browsers and load balancers up to 60 s): a client
+#: that reuses a connection the server is closing at that moment gets "server disconnected"
+#: on a request that never reached the server (uvicorn's default, 5 s, equals httpx's).
+KEEP_ALIVE_S = 65
+
 
 def _database_arg(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
@@ -169,6 +175,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         log_level=args.log_level,
         ws="websockets-sansio",
         ws_per_message_deflate=settings.ws_deflate,
+        timeout_keep_alive=KEEP_ALIVE_S,
     )
     return 0
 

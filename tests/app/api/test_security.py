@@ -6,7 +6,8 @@
 * viewer limits (per run, per client, in all) with a reason, and a revoked token's sockets
   closed within a second;
 * against a real ``mapwise serve``: DNS-rebinding probes all refused, 1000 viewers of one
-  run held to the cap with bounded memory and event-loop lag.
+  run held to the cap with bounded memory and event-loop lag, and an idle keep-alive
+  connection still open when a client (httpx keeps one 5 s) reuses it.
 """
 
 from __future__ import annotations
@@ -278,6 +279,42 @@ def test_dns_rebinding_probes_are_all_refused(live: tuple[Server, int, int]) -> 
         _raw_handshake(port, f"/api/runs/{run}/stream", host=f"localhost:{port}", origin=None)
         == 101
     )
+
+
+@pytest.mark.slow
+def test_an_idle_keep_alive_connection_outlives_the_clients_pool_expiry(
+    live: tuple[Server, int, int],
+) -> None:
+    """A connection idle for longer than httpx keeps one pooled (5 s) still answers: with
+    uvicorn's default (also 5 s) the server could close it just as the client reused it, and
+    the client got "server disconnected" on a request the server never read (a soak failure)."""
+    server, _, run = live
+    request = f"GET /api/runs/{run} HTTP/1.1\r\nHost: 127.0.0.1:{server.port}\r\n\r\n".encode()
+    with socket.create_connection(("127.0.0.1", server.port), timeout=10) as s:
+        for pause in (0.0, 6.0):
+            time.sleep(pause)
+            s.sendall(request)
+            head = _read_response(s)
+            assert head.startswith(b"HTTP/1.1 200"), head[:80]
+
+
+def _read_response(s: socket.socket) -> bytes:
+    """The head of one HTTP/1.1 response, its Content-Length body read past; b"" if the
+    peer closed the connection first."""
+    data = b""
+    while b"\r\n\r\n" not in data:
+        chunk = s.recv(65536)
+        if not chunk:
+            return data
+        data += chunk
+    head, _, body = data.partition(b"\r\n\r\n")
+    length = re.search(rb"(?i)content-length: *(\d+)", head)
+    while length is not None and len(body) < int(length.group(1)):
+        chunk = s.recv(65536)
+        if not chunk:
+            break
+        body += chunk
+    return head
 
 
 @pytest.mark.slow
