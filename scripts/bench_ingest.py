@@ -63,8 +63,8 @@ def make_logs(directory: Path, rows: list[int]) -> dict[int, Path]:
 
 
 def machine() -> dict[str, Any]:
-    """:func:`app.cli.bench_sections.machine`, asked of a child process."""
-    code = "import json\nfrom app.cli.bench_sections import machine\nprint(json.dumps(machine()))"
+    """:func:`app.cli.bench_timing.machine`, asked of a child process."""
+    code = "import json\nfrom app.cli.bench_timing import machine\nprint(json.dumps(machine()))"
     out = subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT, capture_output=True)
     return json.loads(out.stdout)
 

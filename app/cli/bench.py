@@ -67,16 +67,18 @@ def run_command(args: argparse.Namespace) -> int:
 
 def run_benchmarks(*, quick: bool = False, sections: Sequence[str] | None = None) -> dict[str, Any]:
     """Every section of :data:`SECTIONS`, or only those named in ``sections``."""
-    from app.cli import bench_sections as measure  # numba kernels: only when benchmarking
+    # numba kernels: only when benchmarking
+    from app.cli import bench_filters, bench_peers, bench_scenarios
+    from app.cli.bench_timing import machine
 
     chosen = set(SECTIONS if sections is None else sections)
     unknown = sorted(chosen - set(SECTIONS))
     if unknown:
         raise ConfigError(f"unknown bench section(s) {unknown}; choose from {list(SECTIONS)}")
-    report: dict[str, Any] = {"machine": measure.machine()}
+    report: dict[str, Any] = {"machine": machine()}
     if "sweep" in chosen:
         sizes = [2, 4, 8, 12, 16] if quick else list(range(2, 22))
-        rows = measure.sweep(sizes, quick)
+        rows = bench_filters.sweep(sizes, quick)
         skf = {r["n"]: r["samples_per_s"]["skf"] for r in rows}
         report["sweep"] = rows
         report["skf_flatness"] = {
@@ -84,28 +86,28 @@ def run_benchmarks(*, quick: bool = False, sections: Sequence[str] | None = None
             "sizes": [min(skf), max(skf)],
         }
     if "nox" in chosen:
-        report["nox_12x18"] = measure.nox_table(quick)
+        report["nox_12x18"] = bench_filters.nox_table(quick)
     if "kf" in chosen:
-        report["full_kf"] = measure.full_kf(16, quick)
+        report["full_kf"] = bench_peers.full_kf(16, quick)
     if "numpy" in chosen:
-        report["numpy"] = measure.numpy_comparison(quick)
+        report["numpy"] = bench_peers.numpy_comparison(quick)
     if "specialisation" in chosen:
-        report["specialisation"] = measure.specialisation(quick)
+        report["specialisation"] = bench_filters.specialisation(quick)
     if "sskf-gain" in chosen:
-        report["sskf_product_vs_exact_gain"] = measure.sskf_gain_gap()
+        report["sskf_product_vs_exact_gain"] = bench_filters.sskf_gain_gap()
     if "simulators" in chosen:
-        report["simulators"] = measure.simulators()
+        report["simulators"] = bench_scenarios.simulators()
     if "estimators" in chosen:
-        report["estimators"] = measure.estimators_on_scenarios(quick)
+        report["estimators"] = bench_scenarios.estimators_on_scenarios(quick)
     if "observers" in chosen:
-        report["observers"] = measure.observers_on_scenarios(quick)
-    report["machine"]["load_average_after"] = measure.machine()["load_average"]
+        report["observers"] = bench_scenarios.observers_on_scenarios(quick)
+    report["machine"]["load_average_after"] = machine()["load_average"]
     return report
 
 
 def format_report(report: dict[str, Any]) -> str:
     """The report as text; sections not in ``report`` are left out."""
-    from app.cli.bench_sections import FILTERS
+    from app.cli.bench_filters import FILTERS
 
     lines: list[str] = _machine_lines(report["machine"])
     if "sweep" in report:

@@ -8,12 +8,12 @@ appended to the result, so the memory beyond the parsed columns is about one blo
 and blank lines are dropped from a block before pyarrow sees it (pyarrow has no comment
 syntax).
 
-pyarrow's number syntax is a subset of mapwise's (:data:`app.io.csv_files._NUMBER`: ASCII
+pyarrow's number syntax is a subset of mapwise's (:data:`app.io.csv_sniff.NUMBER`: ASCII
 digits, sign, point, exponent; no ``1_000``, no other digits) and both round correctly, so a
 value pyarrow accepts is the value Python reads. Whenever pyarrow refuses a block (a cell it
 cannot read, a row with the wrong field count) or the block holds something that mapwise
 refuses although pyarrow read it (an empty cell where none is allowed, ``nan``, ``inf``),
-that one block is read again by the Python rules (:func:`app.io.csv_files._parse_body`),
+that one block is read again by the Python rules (:func:`app.io.csv_body.parse_body`),
 which either give its values (a cell only Python accepts, such as a decimal point in a
 decimal-comma file) or the error naming the file line and column. Line numbers are worked
 out only then: the fast path never splits the text into Python lines.
@@ -30,12 +30,13 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.csv as pacsv
 
-from app.io.csv_files import _content_lines, _parse_body
+from app.io.csv_body import parse_body
+from app.io.csv_sniff import content_lines
 
 BLOCK_CHARS = 4 << 20  # text per block handed to pyarrow: the memory beyond the columns
 ARROW_BLOCK_BYTES = 1 << 20  # pyarrow's own block: the unit its threads parse in parallel
 # A whole comment or blank line (after a lone CR has been made a LF): the lines
-# `_content_lines` leaves out. `\s` of a str pattern is str.isspace(), as in str.strip().
+# `content_lines` leaves out. `\s` of a str pattern is str.isspace(), as in str.strip().
 _SKIP_LINE = re.compile(r"^[^\S\n]*(?:#[^\n]*)?(?:\n|\Z)", re.MULTILINE)
 _LF = {str: "\n", bytes: b"\n"}
 
@@ -62,7 +63,7 @@ def read_body(
 ) -> Body:
     """Floats of the columns in ``must`` (name → strict) of the data rows in
     ``text[start:]`` (a str, or bytes of pure ASCII), by the rules of
-    :func:`app.io.csv_files._parse_body`."""
+    :func:`app.io.csv_body.parse_body`."""
     active = dict(must)  # the columns still read: a non-strict one leaves when found textual
     columns: dict[str, _Column | None] = {name: _Column() for name in must}
     blocks: list[tuple[int, int, int]] = []  # text start, text end, first row
@@ -74,10 +75,10 @@ def read_body(
         block = text[pos:end]
         got = _arrow_block(block, delimiter, names, active, decimal, allowed_empty)
         if got is None:  # the error path: Python rules, exact values or messages
-            numbered = _content_lines(_str(block), _line_number(text, pos))
+            numbered = content_lines(_str(block), _line_number(text, pos))
             body = [ln for _, ln in numbered]
             lines = [n for n, _ in numbered]
-            parsed = _parse_body(body, lines, delimiter, names, active, decimal, allowed_empty)
+            parsed = parse_body(body, lines, delimiter, names, active, decimal, allowed_empty)
             got = {name: None if v is None else [v] for name, v in parsed.items()}, len(lines)
         values, count = got
         # rows still to come, from this block's rows per character: one allocation per column
@@ -207,7 +208,7 @@ def _line_finder(text: str | bytes, blocks: list[tuple[int, int, int]]) -> Calla
     def line_of(k: int) -> int:
         b = bisect.bisect_right(firsts, k) - 1
         start, end, first = blocks[b]
-        numbered = _content_lines(_str(text[start:end]), _line_number(text, start))
+        numbered = content_lines(_str(text[start:end]), _line_number(text, start))
         return numbered[k - first][0]
 
     return line_of

@@ -5,11 +5,12 @@ header as ``name [unit]`` or in an optional second row whose non-empty cells are
 non-numeric; lines starting with ``#`` are comments. With ``;`` or tab as delimiter a decimal
 comma (``1,5``) is recognised. Every problem is reported with its file line and column name.
 
-The header, units row and delimiter are read here in Python (a few lines); the body by
-:mod:`app.io.csv_arrow` with ``pyarrow.csv`` in blocks, which falls back to the Python
-rules of this module (:func:`_parse_body`) only for a block pyarrow refuses or that holds
-a value mapwise refuses — so values and messages are those of the Python rules alone
-(``tests/app/io/test_csv_equivalence.py`` holds the two to that).
+The header, units row and delimiter are read in Python from the first lines
+(:mod:`app.io.csv_sniff`); the body by :mod:`app.io.csv_arrow` with ``pyarrow.csv`` in
+blocks, which falls back to the Python rules (:func:`app.io.csv_body.parse_body`) only for
+a block pyarrow refuses or that holds a value mapwise refuses — so values and messages are
+those of the Python rules alone (``tests/app/io/test_csv_equivalence.py`` holds the two to
+that).
 
 ``mapwise adapt`` reads only the columns it needs (:func:`read_csv` with ``columns``); the
 upload path (:mod:`app.io.ingest`) calls :func:`parse_sparse_csv`: every column must be
@@ -21,35 +22,25 @@ from __future__ import annotations
 
 import csv
 import re
-from collections import Counter
-from collections.abc import Callable, Mapping, Sequence, Set
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from app.io.errors import InputError
-from app.io.names import check_name
+from app.io.csv_body import cell_columns
+from app.io.csv_sniff import (
+    TIME_COLUMNS,
+    LogFormatError,
+    check_delimiters,
+    head_lines,
+    is_units_row,
+    sniff_decimal,
+    sniff_delimiter,
+    split_header,
+)
 from estimation import Signals
 from estimation.errors import SignalError
-
-TIME_COLUMNS = ("time", "time_s", "t", "timestamp", "timestamps")  # the last: asammdf's exports
-DELIMITERS = ",;\t"
-_HEADER_UNIT = re.compile(r"^\s*(?P<name>.+?)\s*\[(?P<unit>[^\]]*)\]\s*$")
-_DECIMAL_COMMA = re.compile(r"^\s*[+-]?\d+,\d+([eE][+-]?\d+)?\s*$")
-_DECIMAL_POINT = re.compile(r"\d\.\d")
-# The one number syntax of a cell: plain ASCII digits, sign, point, exponent (and the NaN/inf
-# spellings, which the finite check then refuses with its own message). float() alone would
-# also take ``1_000``, Arabic-Indic or fullwidth digits and non-ASCII spaces.
-_NUMBER = re.compile(
-    r"\s*[+-]?(?:(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|nan|inf|infinity)\s*",
-    re.IGNORECASE | re.ASCII,
-)
-CHUNK_ROWS = 20_000
-
-
-class LogFormatError(InputError, SignalError):
-    """The file is not a usable log; the message names the line and column."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -143,7 +134,7 @@ def parse_csv(
     )
     try:
         parsed = {name: v for name, v in table.values.items() if v is not None}
-        signals = Signals(table.time, parsed, table.units)
+        signals = Signals(table.time, parsed, table.units, copy=False)
     except SignalError as exc:
         message, line = _with_line(str(exc), table.rows, table.line_of)
         raise LogFormatError(message, field=table.time_column or "time", line=line) from None
@@ -224,7 +215,7 @@ def _read_table(
             text = text.decode("utf-8-sig")
         except UnicodeDecodeError as exc:
             raise LogFormatError(f"not a UTF-8 text file ({exc.reason})", field="file") from None
-    head = _head_lines(text, 22)  # header, units row and the 20 rows sniffed
+    head = head_lines(text, 22)  # header, units row and the 20 rows sniffed
     lines = [(n, ln) for n, ln, _ in head]
     if not lines:
         raise LogFormatError("empty file, expected a header row", field="file")
@@ -239,8 +230,8 @@ def _read_table(
     delimiter = sniff_delimiter([ln for _, ln in lines[:20]])
     rows = list(csv.reader([ln for _, ln in lines[:2]], delimiter=delimiter))
     numbers = [n for n, _ in lines]
-    _check_delimiters(lines[:20], delimiter, rows[0])
-    names, header_units = _split_header(rows[0], header_line)
+    check_delimiters(lines[:20], delimiter, rows[0])
+    names, header_units = split_header(rows[0], header_line)
     if max_columns is not None and len(names) > max_columns:
         raise LogFormatError(
             f"line {header_line}: {len(names)} columns, the limit is {max_columns}",
@@ -248,7 +239,7 @@ def _read_table(
             line=header_line,
         )
     start = 1
-    if len(rows) > 1 and _is_units_row(rows[1]):
+    if len(rows) > 1 and is_units_row(rows[1]):
         if len(rows[1]) != len(names):
             raise LogFormatError(
                 f"line {numbers[1]}: units row has {len(rows[1])} fields, header has {len(names)}",
@@ -268,7 +259,9 @@ def _read_table(
             )
         unit_of[name] = str(unit)
     if decimal is None:
-        cells = _columns([ln for _, ln in sample], [n for n, _ in sample], delimiter, len(names))
+        cells = cell_columns(
+            [ln for _, ln in sample], [n for n, _ in sample], delimiter, len(names)
+        )
         decimal = sniff_decimal([list(r) for r in zip(*cells, strict=True)], delimiter)
     if time_column is None:
         time_column = next((c for c in TIME_COLUMNS if c in names), None)
@@ -306,300 +299,6 @@ def _read_table(
     stamps = values.pop(time_column) if time_column is not None else None
     time = stamps if stamps is not None else np.arange(body.rows, dtype=np.float64)
     return _Table(time, values, unit_of, time_column, delimiter, decimal, body.rows, body.line_of)
-
-
-def split_lines(text: str) -> list[str]:
-    """Lines ended by LF, CRLF or CR only: :meth:`str.splitlines` also breaks at U+0085,
-    U+2028 and U+2029, which may sit inside a cell (and must then be judged there)."""
-    return text.replace("\r\n", "\n").replace("\r", "\n").split("\n")
-
-
-def _content_lines(text: str, first: int = 1) -> list[tuple[int, str]]:
-    """Non-blank, non-comment lines with their line numbers (``text`` starting at line
-    ``first``)."""
-    return [
-        (n, ln)
-        for n, ln in enumerate(split_lines(text), start=first)
-        if ln.strip() and not ln.lstrip().startswith("#")
-    ]
-
-
-_LINE_BREAK = re.compile(r"\r\n|\r|\n")
-_LINE_BREAK_BYTES = re.compile(rb"\r\n|\r|\n")
-
-
-def _head_lines(text: str | bytes, count: int) -> list[tuple[int, str, int]]:
-    """The first ``count`` content lines (as :func:`_content_lines`): line number, text and
-    where the next line starts, without splitting the rest of ``text`` (a str, or bytes of
-    pure ASCII)."""
-    out: list[tuple[int, str, int]] = []
-    pos, number = 0, 0
-    breaks = _LINE_BREAK if isinstance(text, str) else _LINE_BREAK_BYTES
-    while pos < len(text) and len(out) < count:
-        match = breaks.search(text, pos)  # type: ignore[arg-type]
-        end, after = (match.start(), match.end()) if match else (len(text), len(text))
-        number += 1
-        part = text[pos:end]
-        line = part if isinstance(part, str) else part.decode("ascii")
-        if line.strip() and not line.lstrip().startswith("#"):
-            out.append((number, line, after))
-        pos = after
-    return out
-
-
-def sniff_delimiter(sample_lines: list[str]) -> str:
-    """The column delimiter among tab, ``;`` and ``,``.
-
-    First choice: a delimiter that occurs equally often (and at least once) on every sample
-    line, preferring tab, then ``;`` (whose files often use a decimal comma, so ``,`` may be
-    just as regular), then ``,``; else :class:`csv.Sniffer` (quoted fields); else the one
-    most frequent in the header.
-    """
-    for d in ("\t", ";", ","):
-        counts = {line.count(d) for line in sample_lines}
-        if len(counts) == 1 and 0 not in counts:
-            return d
-    try:
-        return csv.Sniffer().sniff("\n".join(sample_lines), delimiters=DELIMITERS).delimiter
-    except csv.Error:
-        header = sample_lines[0]
-        counts = {d: header.count(d) for d in DELIMITERS}
-        best = max(counts, key=lambda d: counts[d])
-        return best if counts[best] else ","
-
-
-def _check_delimiters(sample: list[tuple[int, str]], delimiter: str, header: list[str]) -> None:
-    """Refuse a file whose lines are split by different delimiters, naming the line.
-
-    Two signatures: a row that has the header's field count only when split at another
-    delimiter; and a header cell holding another delimiter that recurs in exactly the same
-    columns of every sampled row (``time,a;b`` over ``0,1;2``) — a decimal comma would put
-    commas in the values, never only where the names have them.
-    """
-    header_line = sample[0][0]
-    width = len(header)
-    for number, text in sample[1:]:
-        if '"' not in text and text.count(delimiter) + 1 != width:
-            other = _splits_into(text, delimiter, width)
-            if other is not None:
-                raise LogFormatError(
-                    _mixed_message(number, other, delimiter), field="file", line=number
-                )
-    for other in DELIMITERS.replace(delimiter, ""):
-        in_header = [cell.count(other) for cell in header]
-        if not any(in_header) or any('"' in text for _, text in sample):
-            continue
-        rows = [text.split(delimiter) for _, text in sample[1:]]
-        if rows and all(
-            len(row) == width and [c.count(other) for c in row] == in_header for row in rows
-        ):
-            cell = header[next(j for j, n in enumerate(in_header) if n)]
-            raise LogFormatError(
-                f"line {header_line}: the delimiter is inconsistent: column {cell.strip()!r} "
-                f"contains {other!r} though the columns are separated by {delimiter!r} (the "
-                f"rows have {other!r} in the same places); use one delimiter throughout",
-                field="header",
-                line=header_line,
-            )
-
-
-def _splits_into(text: str, delimiter: str, width: int) -> str | None:
-    """The other delimiter that splits ``text`` into ``width`` fields, if one does."""
-    for other in DELIMITERS.replace(delimiter, ""):
-        if text.count(other) and text.count(other) + 1 == width:
-            return other
-    return None
-
-
-def _mixed_message(line: int, other: str, delimiter: str) -> str:
-    return (
-        f"line {line}: the delimiter is inconsistent: this row is separated by {other!r}, "
-        f"the header by {delimiter!r}; use one delimiter throughout"
-    )
-
-
-def sniff_decimal(rows: list[list[str]], delimiter: str) -> str:
-    if delimiter == ",":
-        return "."
-    cells = [c for row in rows for c in row]
-    comma = any(_DECIMAL_COMMA.match(c) for c in cells)
-    point = any(_DECIMAL_POINT.search(c) for c in cells)
-    return "," if comma and not point else "."
-
-
-def _split_header(header: list[str], line: int) -> tuple[list[str], list[str]]:
-    names, units = [], []
-    for cell in header:
-        match = _HEADER_UNIT.match(cell)
-        name, unit = (match["name"], match["unit"].strip()) if match else (cell.strip(), "")
-        if not name:
-            raise LogFormatError(
-                f"line {line}: empty column name in the header", field="header", line=line
-            )
-        try:
-            name = check_name(name, field="header", what="column name", line=line)
-        except InputError as exc:
-            raise LogFormatError(exc.message, field="header", line=line) from None
-        names.append(name)
-        units.append(unit)
-    dupes = sorted(n for n, count in Counter(names).items() if count > 1)
-    if dupes:
-        raise LogFormatError(
-            f"line {line}: duplicate column names {dupes}", field="header", line=line
-        )
-    return names, units
-
-
-def _columns(body: list[str], lines: list[int], delimiter: str, width: int) -> list[Sequence[str]]:
-    """The body's cells column by column, every row checked to have ``width`` fields.
-
-    Without quote characters the whole body is split at once (fast for long logs);
-    otherwise each line goes through :mod:`csv`.
-    """
-    if not body:
-        return [[] for _ in range(width)]
-    joined = "\n".join(body)
-    if '"' in joined:
-        rows = list(csv.reader(body, delimiter=delimiter))
-        counts = [len(row) for row in rows]
-    else:
-        rows = None
-        counts = [ln.count(delimiter) + 1 for ln in body]
-    for k, count in enumerate(counts):
-        if count != width:
-            other = None if rows is not None else _splits_into(body[k], delimiter, width)
-            message = (
-                _mixed_message(lines[k], other, delimiter)
-                if other is not None
-                else f"line {lines[k]}: {count} fields, header has {width}"
-            )
-            raise LogFormatError(message, field="file", line=lines[k])
-    if rows is not None:
-        return [list(col) for col in zip(*rows, strict=True)]
-    cells = joined.replace("\n", delimiter).split(delimiter)
-    return [cells[j::width] for j in range(width)]
-
-
-def _parse_body(
-    body: list[str],
-    lines: list[int],
-    delimiter: str,
-    names: list[str],
-    must: Mapping[str, bool],
-    decimal: str,
-    allowed_empty: Set[str] = frozenset(),
-) -> dict[str, np.ndarray | None]:
-    """The Python rules for a block of the body (:mod:`app.io.csv_arrow` calls this only for
-    a block pyarrow refused or that holds a refused value): floats of the columns in
-    ``must`` (name → strict), converted :data:`CHUNK_ROWS` rows at a time so that the cells
-    held as Python strings stay a small part of the block; a non-strict column that is not
-    numeric throughout is ``None``. An empty cell of a column in ``allowed_empty`` is NaN."""
-    parts: dict[str, list[np.ndarray] | None] = {name: [] for name in must}
-    for lo in range(0, max(len(body), 1), CHUNK_ROWS):
-        chunk_lines = lines[lo : lo + CHUNK_ROWS]
-        cells = _columns(body[lo : lo + CHUNK_ROWS], chunk_lines, delimiter, len(names))
-        for j, name in enumerate(names):
-            kept = parts.get(name)
-            if kept is None:
-                continue
-            values = _parse_column(
-                cells[j],
-                chunk_lines,
-                name,
-                strict=must[name],
-                decimal=decimal,
-                empty_is_missing=name in allowed_empty,
-            )
-            if values is None:
-                parts[name] = None
-            else:
-                kept.append(values)
-    return {name: None if kept is None else np.concatenate(kept) for name, kept in parts.items()}
-
-
-def _is_units_row(cells: list[str]) -> bool:
-    filled = [c.strip() for c in cells if c.strip()]
-    return bool(filled) and not any(_is_number(c) for c in filled)
-
-
-def _is_number(text: str) -> bool:
-    return _NUMBER.fullmatch(text) is not None or _DECIMAL_COMMA.match(text) is not None
-
-
-def _parse_column(
-    cells: Sequence[str],
-    lines: list[int],
-    name: str,
-    *,
-    strict: bool,
-    decimal: str = ".",
-    empty_is_missing: bool = False,
-) -> np.ndarray | None:
-    """Floats of one column; ``None`` for a non-numeric column when not ``strict``; with
-    ``empty_is_missing`` an empty cell is NaN (no sample), an explicit NaN still refused.
-
-    The whole column is converted at once; only when that fails is it walked cell by cell
-    to name the first bad line.
-    """
-    texts = [c.replace(",", ".") for c in cells] if decimal == "," else list(cells)
-    empty = _empty_cells(texts) if empty_is_missing else None
-    if empty is not None:
-        texts = ["nan" if e else t for t, e in zip(texts, empty, strict=True)]
-    joined = "".join(texts)
-    if not joined.isascii() or "_" in joined:  # only then can float() and _NUMBER disagree
-        k = next((k for k, t in enumerate(texts) if _NUMBER.fullmatch(t) is None), None)
-        if k is not None and not strict:
-            return None
-        if k is not None and _looks_numeric(texts[k]):
-            raise LogFormatError(
-                f"line {lines[k]}, column {name!r}: {cells[k].strip()!r} is not a plain number "
-                "(ASCII digits 0-9 with an optional sign, decimal point and exponent; no digit "
-                "separators)",
-                field=name,
-                line=lines[k],
-            )
-    try:
-        out = np.array(texts, dtype=np.float64) if texts else np.empty(0)
-    except ValueError:
-        out = None
-    if out is None:
-        if not strict:
-            return None
-        for k, text in enumerate(texts):
-            if _NUMBER.fullmatch(text) is None:
-                shown = cells[k].strip()
-                what = "empty value" if not shown else f"non-numeric value {shown!r}"
-                raise LogFormatError(
-                    f"line {lines[k]}, column {name!r}: {what}", field=name, line=lines[k]
-                )
-        out = np.array([float(t) for t in texts])  # numpy and float() disagree: trust float()
-    bad = ~np.isfinite(out)
-    if empty is not None:
-        bad &= ~empty
-    if np.any(bad):
-        k = int(np.argmax(bad))
-        raise LogFormatError(
-            f"line {lines[k]}, column {name!r}: {cells[k].strip()} is not allowed "
-            "(values must be finite)",
-            field=name,
-            line=lines[k],
-        )
-    return out
-
-
-def _empty_cells(texts: list[str]) -> np.ndarray | None:
-    """Where the cells are empty (blank), or ``None`` when none is."""
-    empty = np.fromiter((not t.strip() for t in texts), dtype=bool, count=len(texts))
-    return empty if empty.any() else None
-
-
-def _looks_numeric(text: str) -> bool:
-    """Python would read ``text`` as a number (``1_000``, ``١٢``): worth its own message."""
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
 
 
 def _with_line(message: str, rows: int, line_of: Callable[[int], int]) -> tuple[str, int | None]:

@@ -13,7 +13,8 @@ import dataclasses
 import re
 from collections.abc import Mapping
 
-from app.io.csv_files import DELIMITERS, TIME_COLUMNS, SparseCsv, parse_sparse_csv, split_lines
+from app.io.csv_files import SparseCsv, parse_sparse_csv
+from app.io.csv_sniff import DELIMITERS, TIME_COLUMNS, split_lines
 from app.io.errors import InputError, unsupported
 
 _BINARY = re.compile(r"[\x00-\x08\x0b\x0e-\x1f\x7f]")

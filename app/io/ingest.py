@@ -169,7 +169,7 @@ def ingest(
     _check_recorded(kept, limits)
     table = resample(kept, grid, max_rows=limits.max_rows, max_values=limits.max_values)
     try:
-        signals = Signals(table.time, table.channels, table.units)
+        signals = Signals(table.time, table.channels, table.units, copy=False)
     except SignalError as exc:
         raise InputError(str(exc), field="file") from None
     if kind != "csv":  # CSV units are applied while parsing (the units row rule)
@@ -248,7 +248,7 @@ def _apply_units(signals: Signals, units: Mapping[str, str] | None) -> Signals:
                 field=f"units.{name}",
             )
     merged = {**signals.units, **{k: str(v) for k, v in units.items()}}
-    return Signals(signals.time, signals.channels, merged)
+    return Signals(signals.time, signals.channels, merged, copy=False)
 
 
 def _check_recorded(tracks: Sequence[Track], limits: IngestLimits) -> None:

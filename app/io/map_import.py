@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from app.io.csv_files import sniff_decimal, sniff_delimiter
+from app.io.csv_sniff import sniff_decimal, sniff_delimiter
 from app.io.errors import InputError, unsupported
 from estimation.errors import ShapeError
 from estimation.table import Axis, Table

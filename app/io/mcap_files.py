@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from app.io.csv_files import TIME_COLUMNS
+from app.io.csv_sniff import TIME_COLUMNS
 from app.io.errors import InputError, too_large, unsupported
 from estimation import Signals
 from estimation.errors import SignalError

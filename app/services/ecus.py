@@ -283,7 +283,7 @@ def _value_names(fmt: str, data: bytes) -> list[str]:
     """The characteristic names a DCM or CDFX file holds; a memory image holds none, it
     only has to read as one (records, checksums)."""
     if fmt in IMAGE_FORMATS:
-        from app.calibration.image import Memory
+        from app.calibration.memory_image import Memory
 
         Memory(data, "the values file")
         return []

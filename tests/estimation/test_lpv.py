@@ -267,7 +267,7 @@ def _with_noise(name: str, seed: int, noise) -> ScenarioData:
     from estimation.plants.airpath import simulate_airpath
     from estimation.plants.engine import DieselEngine
     from estimation.plants.vehicle import operating_points
-    from estimation.scenarios import _LPV_FULL_LOAD_NM, _LPV_FULL_LOAD_RPM
+    from estimation.scenarios.airpath import _LPV_FULL_LOAD_NM, _LPV_FULL_LOAD_RPM
 
     engine = None
     if name == "maf-whtc":

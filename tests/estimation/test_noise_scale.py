@@ -1,4 +1,4 @@
-"""``noise_scale`` of a scenario build (estimation/scenarios.py): it multiplies every sensor
+"""``noise_scale`` of a scenario build (estimation/scenarios/): it multiplies every sensor
 noise σ of the plant's logging and leaves the estimators' σ settings as configured."""
 
 from __future__ import annotations

@@ -8,14 +8,15 @@ from typing import Any
 import numpy as np
 import pytest
 
-from app.cli.bench_sections import _config_for, _numpy_reference, _problem
+from app.cli.bench_filters import config_for, problem
+from app.cli.bench_peers import _numpy_reference
 from estimation.filters.functions import run_chunk
 from estimation.registry import get_spec
 
 
 def _prepared(name: str, *, uniform: bool) -> tuple[Any, Any]:
-    signals, base = _problem(5, 7, 800, seed=3, uniform=uniform)
-    estimator = get_spec(name).build(_config_for(name, base))
+    signals, base = problem(5, 7, 800, seed=3, uniform=uniform)
+    estimator = get_spec(name).build(config_for(name, base))
     prepared = estimator.prepare(signals)
     return prepared, estimator.initial_state(prepared)
 

@@ -315,7 +315,8 @@ def test_logs_longer_than_a_chunk_keep_line_numbers_and_column_rules() -> None:
     """Logs are converted CHUNK_ROWS rows at a time: an error in a later chunk still names its
     file line, and a column that turns non-numeric only there is still dropped (non-strict)
     or refused (upload)."""
-    from app.io.csv_files import CHUNK_ROWS, parse_csv
+    from app.io.csv_body import CHUNK_ROWS
+    from app.io.csv_files import parse_csv
 
     n = 2 * CHUNK_ROWS + 7
     rows = [f"{k * 0.01:.2f},{k},{k % 5}" for k in range(n)]
