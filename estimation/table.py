@@ -25,6 +25,7 @@ import numpy as np
 
 from estimation.errors import ShapeError
 from estimation.kernels.regressor import regressor_kernel
+from estimation.kernels.specialise import corner_token
 
 
 @dataclass(frozen=True, slots=True)
@@ -123,19 +124,34 @@ class Grid:
     def n_corners(self) -> int:
         return 1 << self.ndim
 
-    def regressor(self, U: np.ndarray | Sequence[Sequence[float]]) -> tuple[np.ndarray, np.ndarray]:
+    def regressor(
+        self, U: np.ndarray | Sequence[Sequence[float]], *, specialised: bool = True
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Sparse regressor of a batch of inputs.
 
         Parameters
         ----------
         U : (n, d) array of inputs in axis order and axis units (a 1-D array is taken as
             ``n`` inputs of a 1-D table).
+        specialised : use the kernel compiled for this dimension (1-D to 3-D), or the generic
+            one; both give bit-identical results.
 
         Returns
         -------
         idx : (n, 2^d) int64 flat C-order indices of the active elements.
         w : (n, 2^d) float64 interpolation weights, ``Σ_c w[k, c] = 1``, each in ``[0, 1]``.
         """
+        U = self._checked_inputs(U)
+        n = U.shape[0]
+        idx = np.empty((n, self.n_corners), dtype=np.int64)
+        w = np.empty((n, self.n_corners), dtype=np.float64)
+        corners = corner_token(self.n_corners, specialised=specialised)
+        regressor_kernel(U, self._breakpoints, self._sizes, self._strides, idx, w, corners)
+        return idx, w
+
+    def _checked_inputs(self, U: np.ndarray | Sequence[Sequence[float]]) -> np.ndarray:
+        """``U`` as a C-contiguous ``(n, d)`` float array; :class:`ShapeError` naming the axis
+        and sample if its shape is wrong or a value is not finite."""
         U = np.asarray(U, dtype=np.float64)
         if U.ndim == 1 and self.ndim == 1:
             U = U[:, None]
@@ -149,12 +165,7 @@ class Grid:
             raise ShapeError(
                 f"input {self.axes[col].name!r} is not finite at sample {row}: {U[row, col]}"
             )
-        U = np.ascontiguousarray(U)
-        n = U.shape[0]
-        idx = np.empty((n, self.n_corners), dtype=np.int64)
-        w = np.empty((n, self.n_corners), dtype=np.float64)
-        regressor_kernel(U, self._breakpoints, self._sizes, self._strides, idx, w)
-        return idx, w
+        return np.ascontiguousarray(U)
 
     def cell_index(self, position: Sequence[int]) -> int:
         """Flat C-order index of the grid node at ``position`` (one index per axis)."""

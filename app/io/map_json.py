@@ -7,6 +7,9 @@ It is a contract used by scripts outside the repository::
     {"estimator", "axes": [{"name", "unit", "breakpoints"}], "values", "variance",
      "samples", "rejected": {reason: count}, "timing": {"load_s", "estimate_s"}}
 
+``timing.warmup_s`` (``mapwise adapt``) is the one-off numba start of a new process, timed
+apart from ``estimate_s`` by a warm-up fit of the log's first samples.
+
 ``values`` and ``variance`` are nested lists in axis order (``variance`` is ``null`` for the
 covariance-free filters). Extra keys (``output``, ``accepted``, ``config``) may be added;
 existing ones never change.
@@ -20,20 +23,23 @@ from estimation.estimator import Snapshot
 
 
 def map_document(
-    snapshot: Snapshot, *, samples: int, load_s: float | None = None, estimate_s: float
+    snapshot: Snapshot,
+    *,
+    samples: int,
+    load_s: float | None = None,
+    estimate_s: float,
+    warmup_s: float | None = None,
 ) -> dict[str, Any]:
-    """The map document of a final snapshot (``timing.load_s`` only when ``load_s`` is given)."""
+    """The map document of a final snapshot (``timing.load_s`` and ``timing.warmup_s`` only
+    when given)."""
     table = snapshot.table
     assert table is not None
     rejected = {k: int(v) for k, v in snapshot.rejected.items()}
-    timing = (
-        {"estimate_s": estimate_s}
-        if load_s is None
-        else {
-            "load_s": load_s,
-            "estimate_s": estimate_s,
-        }
-    )
+    timing = {"estimate_s": estimate_s}
+    if load_s is not None:
+        timing = {"load_s": load_s} | timing
+    if warmup_s is not None:
+        timing["warmup_s"] = warmup_s
     return {
         "estimator": snapshot.estimator,
         "axes": [a.to_dict() for a in table.axes],

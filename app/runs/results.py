@@ -65,9 +65,7 @@ class RunResults:
         self.n = len(signals)
         self.outputs: dict[str, np.ndarray] = {}
         self.status = np.full(self.n, -1, dtype=np.int8)
-        self.grid: Table | None = None
-        self.idx: np.ndarray | None = None  # the grid's regressor over the whole log
-        self.w: np.ndarray | None = None
+        self.grid: Table | None = None  # the map's grid, once a snapshot shows it
         self.visits: np.ndarray | None = None
         self.cell_rejections: dict[str, np.ndarray] = {}
         self.rejected: dict[str, int] = {}
@@ -162,9 +160,10 @@ class RunResults:
 
     def active_cell(self, z: int) -> list[int] | None:
         """The grid node nearest the operating point of sample ``z − 1``."""
-        if self.grid is None or self.idx is None or self.w is None or z <= 0:
+        if self.grid is None or z <= 0:
             return None
-        flat = int(nearest_cell(self.idx[z - 1 : z], self.w[z - 1 : z])[0])
+        idx, w = self._regressor(z - 1, z)
+        flat = int(nearest_cell(idx, w)[0])
         return [int(i) for i in np.unravel_index(flat, self.grid.shape)]
 
     def _output(self, name: str) -> np.ndarray:
@@ -178,19 +177,16 @@ class RunResults:
         self.sq_n += int(ok.sum())
 
     def _count_cells(self, table: Table, a: int, z: int) -> None:
-        """Visits (interpolation weight of accepted samples) and rejections per cell."""
+        """Visits (interpolation weight of accepted samples) and rejections per cell, from
+        the chunk's regressor rows (made per chunk: a run never holds the whole log's)."""
         if self.grid is None:
-            names = [ax.name for ax in table.axes]
-            if not all(name in self.signals for name in names):
+            if not all(ax.name in self.signals for ax in table.axes):
                 return
             self.grid = table
-            self.idx, self.w = table.regressor(self.signals.stack(names))
             if self.visits is None:
                 self.visits = np.zeros(table.shape)
         assert self.visits is not None
-        assert self.idx is not None
-        assert self.w is not None
-        idx, w, status = self.idx[a:z], self.w[a:z], self.status[a:z]
+        (idx, w), status = self._regressor(a, z), self.status[a:z]
         size, shape = self.grid.size, table.shape
         self.visits += cell_counts(idx, w, status == STATUS_ACCEPTED, size).reshape(shape)
         for label, mask in self._rejection_masks(a, z, status).items():
@@ -199,6 +195,12 @@ class RunResults:
                 continue
             counts = cell_counts(idx, w, mask, size).reshape(shape)
             self.cell_rejections[label] = self.cell_rejections.get(label, 0) + counts
+
+    def _regressor(self, a: int, z: int) -> tuple[np.ndarray, np.ndarray]:
+        """The map grid's regressor rows of log samples ``[a, z)``."""
+        assert self.grid is not None
+        inputs = [self.signals[ax.name][a:z] for ax in self.grid.axes]
+        return self.grid.regressor(np.column_stack(inputs))
 
     def _rejection_masks(self, a: int, z: int, status: np.ndarray) -> dict[str, np.ndarray]:
         masks = {name: status == code for name, code in CELL_STATUS.items()}

@@ -13,7 +13,14 @@ import math
 from collections.abc import Iterator
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    field_validator,
+    model_validator,
+)
 
 MAX_SIGMA = 1e75
 """Largest standard deviation accepted (σw, σv, σf, the gate): its square, 1e150, leaves
@@ -54,6 +61,22 @@ def bounded(value: Any, limit: float = math.inf) -> Any:
     return value
 
 
+def _sigma_bound(value: Any) -> Any:
+    return bounded(value, MAX_SIGMA)
+
+
+def _variance_bound(value: Any) -> Any:
+    return bounded(value, MAX_VARIANCE)
+
+
+#: A standard deviation (σv, σf): finite and at most :data:`MAX_SIGMA`.
+Sigma = Annotated[float, AfterValidator(_sigma_bound)]
+#: σw of every cell, or per cell: finite and at most :data:`MAX_SIGMA`.
+SigmaCells = Annotated[CellValues, AfterValidator(_sigma_bound)]
+#: P0 of every cell, or per cell: finite and at most :data:`MAX_VARIANCE`.
+VarianceCells = Annotated[CellValues, AfterValidator(_variance_bound)]
+
+
 class AxisConfig(_Strict):
     """One table axis: the input channel it reads and its breakpoints."""
 
@@ -87,17 +110,12 @@ class SensorConfig(_Strict):
     delay_samples: int | None = Field(
         None, ge=0, description="Transport delay τ in samples; overrides delay_s."
     )
-    sigma_f: float = Field(50.0, ge=0.0, description="Process noise σf of the sensor state.")
+    sigma_f: Sigma = Field(50.0, ge=0.0, description="Process noise σf of the sensor state.")
 
     @field_validator("delay_s")
     @classmethod
     def _finite_delay(cls, v: float | None) -> float | None:
         return None if v is None else bounded(v)
-
-    @field_validator("sigma_f")
-    @classmethod
-    def _finite_sigma(cls, v: float) -> float:
-        return bounded(v, MAX_SIGMA)
 
 
 class TableFilterConfig(_Strict):
@@ -121,7 +139,7 @@ class TableFilterConfig(_Strict):
     @field_validator("gate_sigma")
     @classmethod
     def _finite_gate(cls, v: float | None) -> float | None:
-        return None if v is None else bounded(v, MAX_SIGMA)
+        return None if v is None else _sigma_bound(v)
 
     @model_validator(mode="after")
     def _locked_cells_fit(self) -> TableFilterConfig:
@@ -138,24 +156,14 @@ class TableFilterConfig(_Strict):
 
 
 class _Covariance(TableFilterConfig):
-    sigma_w: CellValues = Field(1.0, description="Random-walk σw of each cell per sample.")
-    sigma_v: float = Field(1.0, gt=0.0, description="Measurement noise σv.")
-    p0: CellValues = Field(0.0, description="Initial variance P0 of each cell.")
+    sigma_w: SigmaCells = Field(1.0, description="Random-walk σw of each cell per sample.")
+    sigma_v: Sigma = Field(1.0, gt=0.0, description="Measurement noise σv.")
+    p0: VarianceCells = Field(0.0, description="Initial variance P0 of each cell.")
     limit: Literal["none", "p0"] = Field(
         "none",
         description="Covariance limiting (EKF §3.1): 'p0' caps each variance at P0 "
         "(PSD-preserving row/column scaling).",
     )
-
-    @field_validator("sigma_w", "sigma_v")
-    @classmethod
-    def _finite_sigma(cls, v: Any) -> Any:
-        return bounded(v, MAX_SIGMA)
-
-    @field_validator("p0")
-    @classmethod
-    def _finite_p0(cls, v: Any) -> Any:
-        return bounded(v, MAX_VARIANCE)
 
 
 class KfConfig(_Covariance):
@@ -173,34 +181,19 @@ class SkfConfig(_Covariance):
 class SskfConfig(TableFilterConfig):
     """Steady-state Kalman filter (SKF §4.5)."""
 
-    sigma_w: CellValues = Field(1.0, description="Random-walk σw of each cell per sample.")
-    sigma_v: float = Field(1.0, gt=0.0, description="Measurement noise σv.")
-
-    @field_validator("sigma_w", "sigma_v")
-    @classmethod
-    def _finite_sigma(cls, v: Any) -> Any:
-        return bounded(v, MAX_SIGMA)
+    sigma_w: SigmaCells = Field(1.0, description="Random-walk σw of each cell per sample.")
+    sigma_v: Sigma = Field(1.0, gt=0.0, description="Measurement noise σv.")
 
 
 class RlsConfig(TableFilterConfig):
     """Recursive least squares with forgetting on the active cells."""
 
     forgetting: float = Field(0.995, gt=0.0, le=1.0, description="Forgetting factor λ.")
-    p0: CellValues = Field(1000.0, description="Initial (normalised) covariance of each cell.")
+    p0: VarianceCells = Field(1000.0, description="Initial (normalised) covariance of each cell.")
     limit: Literal["none", "p0"] = Field("none", description="Cap the covariance at P0.")
-    sigma_v: float = Field(
+    sigma_v: Sigma = Field(
         1.0, gt=0.0, description="Measurement noise σv, used only by the innovation gate."
     )
-
-    @field_validator("sigma_v")
-    @classmethod
-    def _finite_sigma(cls, v: Any) -> Any:
-        return bounded(v, MAX_SIGMA)
-
-    @field_validator("p0")
-    @classmethod
-    def _finite_p0(cls, v: Any) -> Any:
-        return bounded(v, MAX_VARIANCE)
 
 
 class NlmsConfig(TableFilterConfig):
@@ -208,11 +201,6 @@ class NlmsConfig(TableFilterConfig):
 
     mu: float = Field(0.5, gt=0.0, lt=2.0, description="Step size μ (0 < μ < 2).")
     eps: float = Field(1e-6, gt=0.0, description="Regularisation ε of the normalisation.")
-    sigma_v: float = Field(
+    sigma_v: Sigma = Field(
         1.0, gt=0.0, description="Measurement noise σv, used only by the innovation gate."
     )
-
-    @field_validator("sigma_v")
-    @classmethod
-    def _finite_sigma(cls, v: Any) -> Any:
-        return bounded(v, MAX_SIGMA)

@@ -4,6 +4,7 @@ and their registry specs."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -23,25 +24,51 @@ from estimation.filters.settings import FilterSettings, grid_of, initial_table, 
 from estimation.filters.state import FilterState, KfState, LocalState, ThetaState
 from estimation.registry import Cost, EstimatorKind, family
 from estimation.signals import Signals
-from estimation.table import Table
+from estimation.table import Grid, Table
 
 STATUS_DELAY = 3
 
 REJECTION_REASONS = ("mask", "innovation", "delay")
 
 
-@dataclass(frozen=True, slots=True, eq=False)
-class Prepared:
-    """A log turned into kernel inputs: regressor rows paired with the measurements they
-    explain (``y[k]`` with ``ψ(u[k−τ])``), the accept mask and the resolved settings."""
+#: Kernel steps per regressor block in :meth:`TableFilter.advance`. A chunk's regressor rows
+#: (``2·2^d`` numbers a step) are made a block at a time, so a run never holds the whole
+#: log's rows (64 B a step in 2-D), and a long fit does not fault in fresh pages for them,
+#: which on a VM costs more than the kernel itself.
+REGRESSOR_BLOCK = 1 << 16
 
-    idx: np.ndarray
-    w: np.ndarray
+
+@dataclass(frozen=True, eq=False)
+class Prepared:
+    """A log turned into kernel inputs: operating points ``u[k−τ]`` paired with the
+    measurements ``y[k]`` they explain, the accept mask and the resolved settings. The
+    regressor rows ``ψ(u)`` are made from the axis channels when needed
+    (:meth:`regressor`)."""
+
+    inputs: tuple[np.ndarray, ...]  # the axis channels over the steps, in axis order
+    grid: Grid
     y: np.ndarray
     accept: np.ndarray
     time_s: np.ndarray
     measured: np.ndarray  # the output channel over the whole log, for residuals
     settings: FilterSettings
+
+    def regressor(self, start: int = 0, stop: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """``(idx, w)`` of steps ``start:stop`` (:meth:`Grid.regressor`)."""
+        return self.grid.regressor(np.column_stack([u[start:stop] for u in self.inputs]))
+
+    @cached_property
+    def rows(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(idx, w)`` of the whole log, made once on first use (benchmarks, tuning)."""
+        return self.regressor()
+
+    @property
+    def idx(self) -> np.ndarray:
+        return self.rows[0]
+
+    @property
+    def w(self) -> np.ndarray:
+        return self.rows[1]
 
 
 class TableFilter(ChunkedEstimator[FilterState, Prepared]):
@@ -90,10 +117,9 @@ class TableFilter(ChunkedEstimator[FilterState, Prepared]):
         mask = np.ones(n, dtype=np.bool_) if accept is None else np.asarray(accept, dtype=bool)
         if mask.shape != (n,):
             raise ShapeError(f"accept mask has shape {mask.shape}, the log has {n} samples")
-        idx, w = self.grid.regressor(signals.stack([a.name for a in self.config.axes])[: n - tau])
         return Prepared(
-            idx=idx,
-            w=w,
+            inputs=tuple(signals[a.name][: n - tau] for a in self.config.axes),
+            grid=self.grid,
             y=np.ascontiguousarray(signals[self.config.output][tau:]),
             accept=mask[tau:] & mask[: n - tau],
             time_s=signals.time,
@@ -114,19 +140,19 @@ class TableFilter(ChunkedEstimator[FilterState, Prepared]):
     def advance(
         self, state: FilterState, prepared: Prepared, stop: int
     ) -> tuple[FilterState, dict[str, np.ndarray], np.ndarray]:
-        """One :func:`run_chunk`; the first chunk is padded with the ``τ`` delay samples,
-        which have no prediction (status 3)."""
+        """:func:`run_chunk` over the steps, a :data:`REGRESSOR_BLOCK` at a time (the kernel
+        carries its state across blocks, so the result is that of one call); the first chunk
+        is padded with the ``τ`` delay samples, which have no prediction (status 3)."""
         start = state.step
         tau = prepared.settings.delay
-        sl = slice(start, stop)
-        state, yhat, status = run_chunk(
-            state,
-            prepared.idx[sl],
-            prepared.w[sl],
-            prepared.y[sl],
-            prepared.accept[sl],
-            prepared.settings,
-        )
+        yhat = np.empty(stop - start)
+        status = np.empty(stop - start, dtype=np.int8)
+        for a in range(start, stop, REGRESSOR_BLOCK):
+            z = min(a + REGRESSOR_BLOCK, stop)
+            idx, w = prepared.regressor(a, z)
+            state, yhat[a - start : z - start], status[a - start : z - start] = run_chunk(
+                state, idx, w, prepared.y[a:z], prepared.accept[a:z], prepared.settings
+            )
         if start == 0 and tau:
             yhat = np.concatenate([np.full(tau, np.nan), yhat])
             status = np.concatenate([np.full(tau, STATUS_DELAY, np.int8), status])
@@ -157,8 +183,9 @@ class TableFilter(ChunkedEstimator[FilterState, Prepared]):
 
 
 # Per sample, every filter keeps: prediction and residual (2), the aligned measurement (1),
-# status and accept codes (1), scoring temporaries (8) and the regressor rows (c indices and
-# c weights) twice, the estimator's and the worker's (4c).
+# status and accept codes (1), scoring temporaries (8), and 4c for regressor rows (c indices
+# and c weights), kept from when the estimator and the worker each held the whole log's; both
+# now make them per block or chunk, so this bound is loose by that much (test_cost.py).
 _SAMPLE_FLOATS = 12
 
 

@@ -129,3 +129,48 @@ def test_sensor_delay_in_seconds_needs_a_uniform_time_base() -> None:
         estimator.fit(uneven)
     by_samples = get_spec("skf").build(config("skf", sensor={"lag": 0.9, "delay_samples": 5}))
     assert by_samples.fit(uneven).rejected["delay"] == 5
+
+
+def test_signals_copy_by_default_and_adopt_without_copying_when_asked() -> None:
+    """``Signals`` copies its inputs unless a reader hands its columns over (``copy=False``):
+    then no copy is made, and the columns become read-only so they cannot change under it."""
+    t, u = np.arange(4) * 0.1, np.array([1.0, 2.0, 3.0, 4.0])
+    copied = Signals(t, {"u": u})
+    assert not np.shares_memory(copied["u"], u)
+    u[0] = 9.0  # the caller's array stays writable and the copy does not see it
+    assert copied["u"][0] == 1.0
+    adopted = Signals(t, {"u": u}, copy=False)
+    assert np.shares_memory(adopted["u"], u)
+    assert np.shares_memory(adopted.time, t)
+    with pytest.raises(ValueError, match="read-only"):
+        u[0] = 1.0
+    ints = Signals(np.arange(3.0), {"n": np.array([1, 2, 3])}, copy=False)
+    assert ints["n"].dtype == np.float64  # a conversion still happens where one is needed
+    with pytest.raises(SignalError, match="non-finite"):
+        Signals(np.arange(2.0), {"u": np.array([1.0, np.nan])}, copy=False)
+
+
+SENSOR = {"lag": 0.9, "delay_samples": 5}
+BLOCK_CASES = [(name, None) for name in FILTERS] + [("kf", SENSOR), ("skf", SENSOR)]
+
+
+@pytest.mark.parametrize(("name", "sensor"), BLOCK_CASES)
+def test_a_chunk_run_in_regressor_blocks_is_one_kernel_call(
+    name: str, sensor: dict[str, object] | None, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``advance`` makes the regressor a block at a time and carries the kernel state across
+    blocks: 7-step blocks give the one-block result bit for bit (map, variance, outputs)."""
+    import estimation.filters.estimator as filters
+
+    extra = {} if sensor is None else {"sensor": sensor}
+    signals = drive()
+    whole = get_spec(name).build(config(name, **extra)).fit(signals)
+    monkeypatch.setattr(filters, "REGRESSOR_BLOCK", 7)
+    blocks = get_spec(name).build(config(name, **extra)).fit(signals)
+    assert np.array_equal(whole.table.values, blocks.table.values)
+    if whole.variance is not None:
+        assert np.array_equal(whole.variance, blocks.variance)
+    for key in whole.outputs:
+        assert np.array_equal(whole.outputs[key], blocks.outputs[key], equal_nan=True)
+    assert np.array_equal(whole.status, blocks.status)
+    assert whole.rejected == blocks.rejected
