@@ -47,6 +47,12 @@ class Settings(BaseSettings):
         DEFAULT_DATABASE_URL,
         description="SQLAlchemy URL: sqlite:///path.db or postgresql+psycopg://user@host/db.",
     )
+    store_url: str = Field(
+        "./mapwise-data/",
+        description="Artifact store of the datasets' samples (one Parquet file each): a "
+        "directory, resolved against the working directory at start-up, or an fsspec URL "
+        "(file:///…, memory://…, s3://… with s3fs installed). Back it up with the database.",
+    )
     host: str = Field("127.0.0.1", description="Interface `mapwise serve` binds to.")
     port: int = Field(8000, ge=0, le=65535, description="TCP port of `mapwise serve`.")
     require_auth: bool | None = Field(
@@ -201,6 +207,13 @@ class Settings(BaseSettings):
                     raise ValueError(f"{host!r}: a wildcard must be `*` or like `*.example.com`")
             return hosts
         return value
+
+    @field_validator("store_url")
+    @classmethod
+    def _store_location(cls, url: str) -> str:
+        from app.store.location import resolve_store_url
+
+        return resolve_store_url(url)
 
     @field_validator("database_url")
     @classmethod

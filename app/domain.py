@@ -51,6 +51,16 @@ class Channel:
 
 
 @dataclass(frozen=True, slots=True)
+class StoredSamples:
+    """Where a dataset's samples are in the artifact store (:mod:`app.store`), and their
+    SHA-256."""
+
+    dataset_id: int
+    key: str
+    sha256: str
+
+
+@dataclass(frozen=True, slots=True)
 class Dataset:
     id: int
     name: str

@@ -15,12 +15,17 @@ its own scheduler, :func:`pytest_xdist_make_scheduler`: a test file is one unit 
 its module-scoped servers and databases start once, and the units start longest first
 (``LONGEST``), so that no long file starts last and keeps one worker busy alone at the end.
 The files in ``EACH_TEST_ALONE`` start a server per test and share nothing per module, so
-each of their tests is a unit of its own and they run side by side.
+each of their tests is a unit of its own and they run side by side; in the
+``EACH_BACKEND_ALONE`` files the tests of one backend share a server or app, so each
+backend's tests are a unit.
 """
 
 from __future__ import annotations
 
+import atexit
 import os
+import shutil
+import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +35,12 @@ import pytest
 # workers (and servers) on 2 cores, where OpenBLAS's threads spin on the many small matrices
 # (35×35 expm, dense observer solves) and cost ~8× the CPU of the work itself.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+# Datasets' samples go to an artifact store (MAPWISE_STORE_URL, default ./mapwise-data/ in
+# the working directory): every app, worker and migration of this process, and the servers it
+# starts, use a temporary one instead (tests/support/server.py gives each database its own).
+if "MAPWISE_STORE_URL" not in os.environ:
+    os.environ["MAPWISE_STORE_URL"] = tempfile.mkdtemp(prefix="mapwise-test-store-")
+    atexit.register(shutil.rmtree, os.environ["MAPWISE_STORE_URL"], ignore_errors=True)
 
 FRONTEND = Path(__file__).resolve().parent / "frontend"
 _skipped: list[str] = []
@@ -37,11 +48,10 @@ _skipped: list[str] = []
 # Seconds each file's tests took in the parallel phase (-n 3, the junit XML's test times, on
 # 2026-12-03 with the machine shared by other jobs, so several times a quiet run's; see
 # docs/contributing.md). Only their order matters: a file missing here starts after these.
+# The files split for issue 14 have twice their longest unit's time measured alone at load
+# 8-20 (2026-12-03, docs/contributing.md), to compare with the suite-measured ones.
 LONGEST: dict[str, float] = {
-    "tests/app/runs/test_live_server.py": 600,
-    "tests/frontend/test_every_estimator.py": 400,  # measured 3-5 min at load 15-21
     "tests/estimation/test_ekf.py": 590,
-    "tests/app/runs/test_attempts.py": 520,
     "tests/app/runs/test_kill_storm.py": 500,
     "tests/app/runs/test_isolation.py": 480,
     "tests/app/runs/test_every_estimator.py": 480,
@@ -50,25 +60,49 @@ LONGEST: dict[str, float] = {
     "tests/app/api/test_openapi_fuzz.py": 420,
     "tests/estimation/test_airpath_plant.py": 290,
     "tests/app/services/test_sweeps.py": 230,
+    "tests/app/runs/test_attempts.py": 220,  # per backend
     "tests/app/api/test_api_contract.py": 220,
+    "tests/frontend/test_every_estimator.py": 210,  # the NOx-map estimators
     "tests/frontend/test_views.py": 210,
     "tests/estimation/test_torque_estimators.py": 200,  # 1000 before one BLAS thread (above)
     "tests/app/runs/test_dask.py": 190,
+    "tests/frontend/test_every_estimator_torque.py": 180,
     "tests/frontend/test_run_view.py": 180,
     "tests/estimation/test_torque_plant.py": 170,
     "tests/app/cli/test_reproduce.py": 170,
     "tests/app/api/test_auth.py": 170,
     "tests/estimation/test_filter_state.py": 170,
+    "tests/app/runs/test_server_lifecycle.py": 160,  # per test
     "tests/app/db/test_migrations.py": 160,
+    "tests/app/runs/test_live_server.py": 150,  # per backend
     "tests/frontend/test_sweeps_batches.py": 150,
     "tests/frontend/test_contrast.py": 150,
     "tests/estimation/test_lpv.py": 140,  # 520 before one BLAS thread: its CPU fell 4×
+    "tests/app/runs/test_attempts_on_servers.py": 110,  # per test
+    "tests/frontend/test_every_estimator_others.py": 100,
 }
 # Each test starts its own server and the module keeps no fixture or cache: the kill storm
-# (two tests of 50 kills, about half the file's time each) and the isolation tests.
+# (two tests of 50 kills, about half the file's time each), the isolation tests, and the
+# servers killed, stopped and restarted (split out of test_live_server.py and
+# test_attempts.py, whose shared-server tests stay one unit each).
 EACH_TEST_ALONE = frozenset(
-    {"tests/app/runs/test_kill_storm.py", "tests/app/runs/test_isolation.py"}
+    {
+        "tests/app/runs/test_kill_storm.py",
+        "tests/app/runs/test_isolation.py",
+        "tests/app/runs/test_server_lifecycle.py",
+        "tests/app/runs/test_attempts_on_servers.py",
+    }
 )
+# Each backend's tests share their module's server or app (a fixture per backend), nothing
+# across backends: a unit per backend, so SQLite's and PostgreSQL's halves run side by side.
+EACH_BACKEND_ALONE = frozenset(
+    {
+        "tests/app/runs/test_live_server.py",
+        "tests/app/runs/test_attempts.py",
+        "tests/app/api/test_openapi_fuzz.py",
+    }
+)
+BACKEND_IDS = ("sqlite", "postgresql")  # the ``backend`` fixture's ids (tests/app/conftest.py)
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
@@ -91,10 +125,17 @@ def _file_of(nodeid: str) -> str:
     return nodeid.split("::", 1)[0]
 
 
+def _backend_of(nodeid: str) -> str:
+    """The ``backend`` id among the test's parameter ids (``test_x[sqlite]``), else ``""``."""
+    ids = nodeid.rsplit("[", 1)[1].rstrip("]").split("-") if nodeid.endswith("]") else []
+    return next((i for i in ids if i in BACKEND_IDS), "")
+
+
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
     """``--dist loadfile``, with the units in collection order (longest first, above) instead
-    of xdist's "most tests first", and a unit per test in the ``EACH_TEST_ALONE`` files."""
+    of xdist's "most tests first", a unit per test in the ``EACH_TEST_ALONE`` files and a
+    unit per backend in the ``EACH_BACKEND_ALONE`` files."""
     if config.getoption("dist") != "loadfile":
         return None
     from xdist.scheduler import LoadFileScheduling
@@ -102,7 +143,11 @@ def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
     class LongestFirst(LoadFileScheduling):
         def _split_scope(self, nodeid: str) -> str:
             path = _file_of(nodeid)
-            return nodeid if path in EACH_TEST_ALONE else path
+            if path in EACH_TEST_ALONE:
+                return nodeid
+            if path in EACH_BACKEND_ALONE:
+                return f"{path}[{_backend_of(nodeid)}]"
+            return path
 
     config.option.loadscopereorder = False
     return LongestFirst(config, log)

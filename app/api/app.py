@@ -55,6 +55,7 @@ from app.services.ecus import EcuService
 from app.services.runs import RunService
 from app.services.sweeps import SweepService
 from app.services.tokens import TokenService
+from app.store import open_store
 
 MULTIPART_OVERHEAD = 1 << 20  # form fields and boundaries around the file
 
@@ -67,7 +68,7 @@ def prepare_database(settings: Settings) -> str:
     """Create the schema on an empty database; refuse an out-of-date or unknown one."""
     check = check_schema(settings.database_url)
     if check.state == "empty":
-        upgrade(settings.database_url)
+        upgrade(settings.database_url, store_url=settings.store_url)
         return check.head
     if check.state != "current":
         raise SchemaError(check.message)
@@ -94,7 +95,7 @@ def create_app(settings: Settings | None = None, *, execute_runs: bool = True) -
             db=db,
             hub=hub,
             executor=executor,
-            datasets=DatasetService(db),
+            datasets=DatasetService(db, open_store(settings.store_url)),
             runs=run_service,
             sweeps=SweepService(db, run_service),
             base_maps=BaseMapService(db, max_cells=settings.max_cells),

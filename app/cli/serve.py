@@ -132,7 +132,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     try:
         check = check_schema(settings.database_url)
         if check.state == "empty":
-            upgrade(settings.database_url)
+            upgrade(settings.database_url, store_url=settings.store_url)
             if settings.seed_demo:
                 from app.services.demo import seed_demo
 
@@ -201,7 +201,7 @@ def _cmd_db_upgrade(args: argparse.Namespace) -> int:
         before = check_schema(settings.database_url)
         if before.state == "unknown":
             raise UsageError(before.message)
-        upgrade(settings.database_url)
+        upgrade(settings.database_url, store_url=settings.store_url)
         after = check_schema(settings.database_url)
     except SQLAlchemyError as exc:
         raise _db_error(exc, settings.database_url) from None

@@ -24,11 +24,14 @@ MIGRATIONS_DIR = resource_dir("migrations")
 SchemaState = Literal["empty", "current", "outdated", "unknown"]
 
 
-def alembic_config(url: str) -> Config:
+def alembic_config(url: str, *, store_url: str | None = None) -> Config:
+    """``store_url``: the artifact store the data migrations (0008) move datasets' samples
+    to and from; ``None``: ``MAPWISE_STORE_URL``, else ``./mapwise-data/``."""
     config = Config()
     config.set_main_option("script_location", str(MIGRATIONS_DIR))
     # ConfigParser interpolation: a literal % in a password must be doubled.
     config.set_main_option("sqlalchemy.url", normalise_url(url).replace("%", "%%"))
+    config.attributes["store_url"] = store_url
     return config
 
 
@@ -51,12 +54,12 @@ def current_revision(url: str) -> str | None:
 MIGRATION_LOCK_KEY = 0x6D617077  # "mapw": the PostgreSQL advisory lock of migrations
 
 
-def upgrade(url: str, revision: str = "head") -> None:
+def upgrade(url: str, revision: str = "head", *, store_url: str | None = None) -> None:
     """Migrate to ``revision``, one process at a time: two servers starting on an empty
     database, or ``mapwise db upgrade`` run twice, never migrate concurrently (the second
-    waits, then finds the schema already there)."""
+    waits, then finds the schema already there). ``store_url``: see :func:`alembic_config`."""
     with migration_lock(url):
-        command.upgrade(alembic_config(url), revision)
+        command.upgrade(alembic_config(url, store_url=store_url), revision)
 
 
 @contextmanager

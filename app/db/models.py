@@ -47,10 +47,13 @@ class Base(DeclarativeBase):
 
 
 class DatasetRow(Base):
-    """A log or simulation: channel list, time base and the samples as an npz payload.
+    """A log or simulation: channel list and time base; its samples are the Parquet object
+    ``artifact`` in the artifact store (:mod:`app.store`), whose SHA-256 is ``content_sha256``.
 
-    ``channels``: ``[{"name", "unit"}]``, plus ``"masked": n`` on a channel with ``n > 0``
-    masked samples; ``notes``: what ingest said about the upload (``NULL``: nothing).
+    ``payload``: the npz samples of a row from before revision 0008 (``NULL`` since: the
+    migration moves them to the store). ``channels``: ``[{"name", "unit"}]``, plus
+    ``"masked": n`` on a channel with ``n > 0`` masked samples; ``notes``: what ingest said
+    about the upload (``NULL``: nothing).
     """
 
     __tablename__ = "datasets"
@@ -67,7 +70,9 @@ class DatasetRow(Base):
     notes: Mapped[list[str] | None] = mapped_column(JSON)
     scenario: Mapped[str | None] = mapped_column(String(64))
     seed: Mapped[int | None] = mapped_column(Integer)
-    payload: Mapped[bytes] = mapped_column(LargeBinary, deferred=True)
+    payload: Mapped[bytes | None] = mapped_column(LargeBinary, deferred=True)
+    artifact: Mapped[str | None] = mapped_column(String(200))
+    content_sha256: Mapped[str | None] = mapped_column(String(64))
     truth: Mapped[bytes | None] = mapped_column(LargeBinary, deferred=True)
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), default=utcnow)
 

@@ -1,8 +1,9 @@
-"""A dataset's stored payload: its samples and, for a simulated one, its truth.
+"""A simulated dataset's truth blob, and the npz samples of datasets before revision 0008.
 
-The samples are one npz (time + channels, float64) so any worker process or machine sharing
-the database can run on them; the truth (true map, scoring points, true series) feeds the
-run metrics. Written by the dataset service, read by the run workers and the exports.
+The truth (true map, scoring points, true series) stays in the dataset's row and feeds the
+run metrics. The samples live in the artifact store since revision 0008 (:mod:`app.store`);
+:func:`pack_signals` is the layout of the ``payload`` blobs that revision moves there
+(``time`` plus ``c0``, ``c1`` … in the channels' order) and its downgrade writes back.
 """
 
 from __future__ import annotations
@@ -13,7 +14,6 @@ from typing import Any
 import numpy as np
 
 from app.db import blobs
-from app.domain import Channel
 from estimation.scenarios import ScenarioData
 from estimation.signals import Signals
 from estimation.table import Table
@@ -23,15 +23,6 @@ def pack_signals(signals: Signals) -> bytes:
     arrays = {"time": signals.time}
     arrays |= {f"c{i}": signals[name] for i, name in enumerate(signals.names)}
     return blobs.pack(arrays)
-
-
-def unpack_signals(blob: bytes, channels: list[Channel]) -> Signals:
-    arrays = blobs.unpack(blob)
-    return Signals(
-        arrays["time"],
-        {c.name: arrays[f"c{i}"] for i, c in enumerate(channels)},
-        {c.name: c.unit for c in channels},
-    )
 
 
 @dataclass(frozen=True, slots=True)

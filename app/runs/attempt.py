@@ -21,7 +21,7 @@ from sqlalchemy.orm import Session
 
 from app.db.engine import Database
 from app.db.repositories import DatasetRepo, MetricRepo, RunRepo, VersionRepo
-from app.domain import Dataset, ResumePoint, Run, RunStatus, Series
+from app.domain import Dataset, ResumePoint, Run, RunStatus, Series, StoredSamples
 from app.errors import DatabaseUnavailableError, SupersededError
 
 T = TypeVar("T")
@@ -67,12 +67,13 @@ class Heartbeat:
 
 @dataclass(frozen=True, slots=True)
 class LoadedRun:
-    """What an attempt reads before it starts: the run, its dataset, the dataset's payload
-    and truth (npz blobs) and the version to resume from (``None``: from the start)."""
+    """What an attempt reads before it starts: the run, its dataset, where the dataset's
+    samples are in the artifact store, its truth (an npz blob) and the version to resume
+    from (``None``: from the start)."""
 
     run: Run
     dataset: Dataset
-    payload: bytes
+    samples: StoredSamples
     truth: bytes | None
     resume: ResumePoint | None
 
@@ -124,7 +125,7 @@ class Attempt:
     # -- reads --------------------------------------------------------------------------------
 
     def load(self) -> LoadedRun:
-        """The run, its dataset's payload and truth, and where to resume from."""
+        """The run, its dataset's samples' key and its truth, and where to resume from."""
 
         def read() -> LoadedRun:
             with self.db.read() as s:
@@ -133,7 +134,7 @@ class Attempt:
                 return LoadedRun(
                     run=run,
                     dataset=datasets.get(run.dataset_id),
-                    payload=datasets.payload(run.dataset_id),
+                    samples=datasets.samples(run.dataset_id),
                     truth=datasets.truth(run.dataset_id),
                     resume=VersionRepo(s).resume_point(self.run_id),
                 )

@@ -35,6 +35,7 @@ class ExecutorBase:
         self.owner = owner
         self.context = WorkerContext(
             database_url=db.url,
+            store_url=settings.store_url,
             live_fps=settings.live_fps,
             series_points=settings.series_points,
             cancel_poll_s=settings.cancel_poll_s,

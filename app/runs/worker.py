@@ -1,8 +1,9 @@
 """One run, executed in a worker process (or in-process): estimator chunks, versions, live ticks.
 
-The worker reads everything it needs from the database (the run, its dataset's payload, the
-last persisted version when resuming) and writes its results there, so it can run in any
-process sharing the database. :class:`RunSession` only orchestrates, per chunk: fold the
+The worker reads everything it needs from the database (the run, its dataset's row, the
+last persisted version when resuming) and the artifact store (the dataset's samples, their
+hash checked) and writes its results to the database, so it can run in any process sharing
+both. :class:`RunSession` only orchestrates, per chunk: fold the
 estimator's snapshot into the results (:mod:`app.runs.results`), persist a map version at
 the run's cadence with the estimator state, so a resumed run continues bit-for-bit
 (:mod:`app.runs.attempt`), publish a live tick at most ``live_fps`` times a second without
@@ -15,7 +16,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -23,13 +24,14 @@ import numpy as np
 from app.db import blobs
 from app.domain import RunStatus
 from app.errors import SupersededError
-from app.io.payload import unpack_signals, unpack_truth
+from app.io.payload import unpack_truth
 from app.runs.attempt import Attempt, database
 from app.runs.gates import apply_gates, parse_gates
 from app.runs.limits import out_of_memory_message
 from app.runs.live import LiveTicks, Publish
 from app.runs.options import run_options
 from app.runs.results import RunResults
+from app.store import default_store_url, load_signals, open_store
 from estimation.estimator import Snapshot
 from estimation.registry import get_spec, load_state
 
@@ -43,6 +45,7 @@ class WorkerContext:
     """What a worker needs besides the run id; picklable except for ``publish``."""
 
     database_url: str
+    store_url: str = field(default_factory=default_store_url)  # the datasets' samples
     live_fps: float = 20.0
     series_points: int = 4000
     cancel_poll_s: float = 0.2
@@ -151,7 +154,7 @@ class RunSession:
     def _prepare(self) -> None:
         loaded = self.attempt.load()
         self.run, dataset = loaded.run, loaded.dataset
-        signals = unpack_signals(loaded.payload, dataset.channels)
+        signals = load_signals(open_store(self.ctx.store_url), loaded.samples, dataset.channels)
         truth = None if loaded.truth is None else unpack_truth(loaded.truth)
         self.rate_hz = dataset.rate_hz
         self.options = run_options(

@@ -12,8 +12,8 @@ The predicted memory of a run is::
 
     WORKER_BASE_BYTES + cost.memory_bytes(p, n, c) + 2 · 8 · channels · n
 
-the worker process itself, the estimator's declared cost, and the dataset (its stored
-payload and the unpacked channels).
+the worker process itself, the estimator's declared cost, and the dataset (its Parquet
+object as read from the artifact store, and the unpacked channels).
 """
 
 from __future__ import annotations

@@ -1,14 +1,17 @@
 """Datasets: ingest an upload, simulate a scenario, list, preview, delete.
 
-The samples are stored in the database as one npz payload (time + channels, float64), so
-any worker process or machine sharing the database can run on them. A simulated dataset
-keeps its truth (true map, scoring points, true series) for the run metrics.
+The samples are one Parquet object in the artifact store (:mod:`app.store`, time + channels,
+float64), its key and SHA-256 in the dataset's row, so any worker process or machine sharing
+the database and the store can run on them. The object is written before the row commits
+(removed again if the commit fails) and deleted after the row's delete commits. A simulated
+dataset keeps its truth (true map, scoring points, true series) in the row, for the run
+metrics.
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any, BinaryIO
 
 import numpy as np
@@ -20,7 +23,15 @@ from app.errors import ConflictError, InvalidRequestError
 from app.io.decimate import finite_or_none, minmax_decimate
 from app.io.ingest import IngestLimits, ingest
 from app.io.names import check_name, without_refused
-from app.io.payload import pack_signals, pack_truth, unpack_signals
+from app.io.payload import pack_truth
+from app.store import (
+    ArtifactStore,
+    delete_dataset,
+    load_signals,
+    open_store,
+    save_staged,
+    stage_signals,
+)
 from estimation.errors import EstimationError
 from estimation.mismatch import MismatchLevel
 from estimation.scenarios import get_scenario, scenarios
@@ -39,8 +50,26 @@ def _dataset_name(name: str | None, filename: str | None, fallback: str) -> str:
 
 
 class DatasetService:
-    def __init__(self, db: Database) -> None:
+    def __init__(self, db: Database, store: ArtifactStore | None = None) -> None:
         self.db = db
+        self.store = store or open_store()
+
+    def _store(self, signals: Signals, add: Callable[[DatasetRepo], Dataset]) -> Dataset:
+        """Stage the samples as Parquet, add the row, put the object under the row's id and
+        commit; an object whose row did not commit is removed again."""
+        with stage_signals(self.store, signals) as staged:
+            stored: tuple[int, str] | None = None
+            try:
+                with self.db.write() as s:
+                    repo = DatasetRepo(s)
+                    dataset = add(repo)
+                    stored = (dataset.id, save_staged(self.store, dataset.id, staged))
+                    repo.attach_samples(dataset.id, stored[1], staged.sha256)
+                return dataset
+            except BaseException:
+                if stored is not None:
+                    delete_dataset(self.store, *stored)
+                raise
 
     def upload(
         self,
@@ -72,8 +101,9 @@ class DatasetService:
             rate_hz=rate_hz,
             time_required=True,
         )
-        with self.db.write() as s:
-            return DatasetRepo(s).add(
+        return self._store(
+            parsed.signals,
+            lambda repo: repo.add(
                 name=given or f"{parsed.source} upload",
                 source=parsed.source,
                 rows=parsed.rows,
@@ -84,9 +114,9 @@ class DatasetService:
                     Channel(c["name"], c["unit"], parsed.masked.get(c["name"], 0))
                     for c in parsed.channels
                 ],
-                payload=pack_signals(parsed.signals),
                 notes=parsed.notes,
-            )
+            ),
+        )
 
     def simulate(
         self,
@@ -109,8 +139,10 @@ class DatasetService:
             raise InvalidRequestError(str(exc), field="duration_s") from exc
         signals = data.signals
         rate = float(1.0 / np.median(np.diff(signals.time))) if len(signals) > 1 else 0.0
-        with self.db.write() as s:
-            return DatasetRepo(s).add(
+        truth = pack_truth(data)
+        return self._store(
+            signals,
+            lambda repo: repo.add(
                 name=given,
                 source=f"scenario:{scenario}",
                 rows=len(signals),
@@ -118,11 +150,11 @@ class DatasetService:
                 duration_s=float(signals.time[-1] - signals.time[0]),
                 time_column="time",
                 channels=[Channel(n, signals.units[n]) for n in signals.names],
-                payload=pack_signals(signals),
                 scenario=scenario,
                 seed=seed,
-                truth=pack_truth(data),
-            )
+                truth=truth,
+            ),
+        )
 
     def get(self, dataset_id: int) -> Dataset:
         with self.db.read() as s:
@@ -136,8 +168,9 @@ class DatasetService:
         with self.db.read() as s:
             repo = DatasetRepo(s)
             dataset = repo.get(dataset_id)
-            payload = repo.payload(dataset_id)
-        return dataset, unpack_signals(payload, dataset.channels)
+            stored = repo.samples(dataset_id)
+        signals = load_signals(self.store, stored, dataset.channels)
+        return dataset, signals
 
     def delete(self, dataset_id: int, *, force: bool) -> None:
         with self.db.write() as s:
@@ -162,7 +195,10 @@ class DatasetService:
                         "cancel them first",
                         field="dataset_id",
                     )
+            key = repo.samples_key(dataset_id)
             repo.delete(dataset_id)
+        if key is not None:
+            delete_dataset(self.store, dataset_id, key)
 
     def preview(self, dataset_id: int, *, points: int) -> dict[str, Any]:
         dataset, signals = self.signals(dataset_id)

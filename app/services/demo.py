@@ -12,6 +12,7 @@ from app.runs.worker import WorkerContext, execute_run
 from app.services.datasets import DatasetService
 from app.services.run_plan import RunRequest
 from app.services.runs import RunService
+from app.store import open_store
 
 EXAMPLE_LOG = Path(__file__).resolve().parents[1] / "data" / "example_nox.csv"
 SPEED_RPM = [750, 780, 1000, 1250, 1500, 1750, 2000, 2500, 3000, 3500, 4000, 4500]
@@ -43,14 +44,15 @@ def seed_demo(settings: Settings) -> int:
     db = Database(settings.database_url)
     try:
         with EXAMPLE_LOG.open("rb") as f:
-            dataset = DatasetService(db).upload(
+            dataset = DatasetService(db, open_store(settings.store_url)).upload(
                 f,
                 filename=EXAMPLE_LOG.name,
                 name="Demo: NOx drive, 150 s at 50 Hz (example_nox.csv)",
                 units=None,
                 max_bytes=settings.max_upload_bytes,
             )
-        runs = RunService(db, settings, _RunNow(WorkerContext(database_url=db.url)))
+        context = WorkerContext(database_url=db.url, store_url=settings.store_url)
+        runs = RunService(db, settings, _RunNow(context))
         run = runs.create(
             RunRequest(
                 dataset_id=dataset.id,

@@ -27,12 +27,12 @@ from app.io.decimate import minmax_decimate
 from app.io.errors import InputError
 from app.io.map_json import map_document
 from app.io.names import check_name
-from app.io.payload import unpack_signals
 from app.runs.frames import StatusFrame
 from app.services import calibration_runs as cal
 from app.services.admission import GroupBudget, Limits
 from app.services.run_clone import CloneRequest, request_of
 from app.services.run_plan import RunRequest, plan_run
+from app.store import load_signals, open_store
 from estimation.estimator import Snapshot
 from estimation.signals import Signals
 from estimation.table import Axis, Table
@@ -423,8 +423,9 @@ class RunService:
         with self.db.read() as s:
             datasets = DatasetRepo(s)
             dataset = datasets.get(run.dataset_id)
-            signals = unpack_signals(datasets.payload(run.dataset_id), dataset.channels)
+            stored = datasets.samples(run.dataset_id)
             segments = VersionRepo(s).segments(run.id)
+        signals = load_signals(open_store(self.settings.store_url), stored, dataset.channels)
         used = [a["name"] for a in (run.table or {}).get("axes", [])] + list(run.signals.values())
         names = [n for n in dict.fromkeys(used) if n in signals] or signals.names
         outputs: dict[str, list[np.ndarray]] = {}

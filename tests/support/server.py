@@ -7,6 +7,7 @@ which put the repository root on ``sys.path`` to import it. It needs only httpx 
 
 from __future__ import annotations
 
+import hashlib
 import os
 import random
 import signal
@@ -77,11 +78,24 @@ def run_body(
     }
 
 
+def store_for(database_url: str) -> str:
+    """The artifact store of a server on ``database_url``: its own directory (a restarted
+    server on the same database finds its datasets) under ``MAPWISE_STORE_URL`` (the test
+    session's, tests/conftest.py), else under the system's temporary directory; never the
+    repository's ``./mapwise-data/``."""
+    digest = hashlib.sha256(database_url.encode()).hexdigest()[:12]
+    base = os.environ.get("MAPWISE_STORE_URL") or str(
+        Path(tempfile.gettempdir()) / "mapwise-stores"
+    )
+    return f"{base.rstrip('/')}/{digest}"
+
+
 class Server:
     """``python -m app.cli serve`` on a free port; ``kill()`` is ``kill -9``.
 
     ``env`` adds to the inherited environment, from which ``MAPWISE_REQUIRE_AUTH`` is dropped
-    (a developer's shell must not lock the tests out); the server's output goes to a
+    (a developer's shell must not lock the tests out) and to which ``MAPWISE_STORE_URL`` is
+    set to :func:`store_for` the database; the server's output goes to a
     temporary log, :meth:`output` gives its tail and :meth:`stop` deletes it."""
 
     def __init__(
@@ -104,7 +118,8 @@ class Server:
             self.args.append("--no-demo")
         inherited = {k: v for k, v in os.environ.items() if k != "MAPWISE_REQUIRE_AUTH"}
         defaults = {"MAPWISE_CANCEL_POLL_S": "0.05", "PYTHONUNBUFFERED": "1"}
-        self.env = inherited | defaults | (env or {})
+        self.env = inherited | defaults | {"MAPWISE_STORE_URL": store_for(database_url)}
+        self.env |= env or {}
         self._last_output = ""
         for attempt in range(1, PORT_ATTEMPTS + 1):
             self._start()

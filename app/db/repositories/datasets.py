@@ -1,4 +1,4 @@
-"""Datasets: the logs, with their payload and truth blobs."""
+"""Datasets: the logs, with their samples' object key and hash, and their truth blob."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from sqlalchemy.orm import Session
 
 from app.db.models import DatasetRow, MapVersionRow, RunMetricRow, RunRow
 from app.db.repositories.base import from_row, valid_id
-from app.domain import Channel, Dataset, Page
+from app.domain import Channel, Dataset, Page, StoredSamples
 from app.errors import NotFoundError
 
 
@@ -46,7 +46,6 @@ class DatasetRepo:
         duration_s: float,
         time_column: str,
         channels: list[Channel],
-        payload: bytes,
         scenario: str | None = None,
         seed: int | None = None,
         truth: bytes | None = None,
@@ -63,7 +62,6 @@ class DatasetRepo:
             notes=list(notes) or None,
             scenario=scenario,
             seed=seed,
-            payload=payload,
             truth=truth,
         )
         self.s.add(row)
@@ -95,11 +93,27 @@ class DatasetRepo:
         items = [_dataset(row, bool(t)) for row, t in self.s.execute(q)]
         return Page(items, total, limit, offset)
 
-    def payload(self, dataset_id: int) -> bytes:
-        blob = self.s.scalar(select(DatasetRow.payload).where(DatasetRow.id == dataset_id))
-        if blob is None:
+    def attach_samples(self, dataset_id: int, key: str, sha256: str) -> None:
+        """Record the object holding the dataset's samples (stored before the commit)."""
+        row = self._row(dataset_id)
+        row.artifact, row.content_sha256 = key, sha256
+        self.s.flush()
+
+    def samples_key(self, dataset_id: int) -> str | None:
+        return self.s.scalar(select(DatasetRow.artifact).where(DatasetRow.id == dataset_id))
+
+    def samples(self, dataset_id: int) -> StoredSamples:
+        """The key and hash of the dataset's samples (404 for an unknown dataset)."""
+        q = select(DatasetRow.artifact, DatasetRow.content_sha256).where(
+            DatasetRow.id == dataset_id
+        )
+        found = self.s.execute(q).first() if valid_id(dataset_id) else None
+        if found is None:
             raise NotFoundError(f"dataset {dataset_id} does not exist", field="dataset_id")
-        return blob
+        key, sha256 = found
+        if key is None or sha256 is None:  # only inside the transaction that adds it
+            raise NotFoundError(f"dataset {dataset_id} has no samples yet", field="dataset_id")
+        return StoredSamples(dataset_id, key, sha256)
 
     def truth(self, dataset_id: int) -> bytes | None:
         return self.s.scalar(select(DatasetRow.truth).where(DatasetRow.id == dataset_id))

@@ -27,7 +27,7 @@ def _drift(url: str) -> list:
 def test_one_head() -> None:
     script = ScriptDirectory.from_config(alembic_config("sqlite://"))
     assert script.get_heads() == [head_revision()]
-    assert head_revision() == "0007"
+    assert head_revision() == "0008"
 
 
 def test_upgraded_empty_database_matches_the_models(backend: str, fresh_url) -> None:  # type: ignore[no-untyped-def]
@@ -83,10 +83,14 @@ def test_data_survives_upgrade_downgrade_upgrade_from_the_previous_schema(
     fresh_url,  # type: ignore[no-untyped-def]
 ) -> None:
     """Rows written at the previous revision are unchanged after upgrade → downgrade →
-    upgrade (SQLite batch mode rebuilds tables; PostgreSQL alters them)."""
+    upgrade (SQLite batch mode rebuilds tables; PostgreSQL alters them). The dataset's
+    samples leave ``payload`` for the artifact store (0008) and come back bit for bit."""
     from datetime import UTC, datetime
 
+    import numpy as np
     from sqlalchemy import MetaData, select
+
+    from app.db import blobs
 
     url = fresh_url(backend)
     script = ScriptDirectory.from_config(alembic_config(url))
@@ -96,6 +100,7 @@ def test_data_survives_upgrade_downgrade_upgrade_from_the_previous_schema(
     engine = make_engine(url)
     names = ("datasets", "runs", "map_versions")
     blob, now = bytes(range(256)), datetime(2026, 1, 2, 3, 4, 5, tzinfo=UTC)
+    samples = {"time": np.array([0.0, 0.1, 0.2]), "c0": np.array([1.5, -0.0, 3e-300])}
     try:
         meta = MetaData()
         meta.reflect(engine, only=names)
@@ -104,7 +109,7 @@ def test_data_survives_upgrade_downgrade_upgrade_from_the_previous_schema(
                 meta.tables["datasets"].insert(),
                 {"id": 7, "name": "log", "source": "csv", "rows": 3, "rate_hz": 10.0,
                  "duration_s": 0.2, "time_column": "time", "channels": [{"name": "y"}],
-                 "payload": blob, "created_at": now},
+                 "payload": blobs.pack(samples), "created_at": now},
             )  # fmt: skip
             connection.execute(
                 meta.tables["runs"].insert(),
@@ -122,19 +127,33 @@ def test_data_survives_upgrade_downgrade_upgrade_from_the_previous_schema(
         def snapshot() -> dict[str, list[tuple]]:
             with engine.connect() as connection:
                 return {
-                    n: [tuple(r) for r in connection.execute(select(meta.tables[n]))] for n in names
+                    n: [tuple(r) for r in connection.execute(select(*_columns(meta, n)))]
+                    for n in names
                 }
+
+        def payload() -> dict[str, np.ndarray]:
+            with engine.connect() as connection:
+                stored = connection.execute(select(meta.tables["datasets"].c.payload)).scalar()
+            return blobs.unpack(stored)
 
         before = snapshot()
         assert all(len(rows) == 1 for rows in before.values())
         upgrade(url)
         command.downgrade(alembic_config(url), previous)
+        assert {k: v.tobytes() for k, v in payload().items()} == {
+            k: v.tobytes() for k, v in samples.items()
+        }
         upgrade(url)
         assert snapshot() == before
         assert current_revision(url) == head_revision()
         assert _drift(url) == []
     finally:
         engine.dispose()
+
+
+def _columns(meta, table: str) -> list:  # type: ignore[no-untyped-def]
+    """The table's columns but the dataset's ``payload`` (in the artifact store since 0008)."""
+    return [c for c in meta.tables[table].c if (table, c.name) != ("datasets", "payload")]
 
 
 def test_tokens_from_before_scopes_get_every_scope(backend: str, fresh_url) -> None:  # type: ignore[no-untyped-def]
