@@ -5,20 +5,27 @@ Against a real ``mapwise serve`` process:
 1. upload a 1-hour 100 Hz log (360 000 rows, 12 channels) as CSV, run the SKF on a 12×18
    grid at full speed, and wait until its versions, metrics and series are persisted:
    seconds per phase and rows/s;
-2. a paced run watched by 20 WebSocket viewers: frames/s each viewer receives;
+2. a paced run watched by ``--viewers`` WebSocket viewers (20 by default, at most the 100 a
+   run admits) in each ``--encoding`` (``json``, ``binary`` or ``both``: one paced run per
+   encoding): frames/s and MB/s each viewer receives (and decodes), the API process's CPU
+   (its event loop and thread pool; % of one core) and the event loop's worst lag
+   (``/api/health``: the last 30 s, so ``--live-seconds 30`` covers the viewers' phase
+   exactly);
 3. API latency (p50/p99) of ``GET /api/runs/{id}`` and ``GET /api/datasets`` polled by 4
    concurrent clients, measured apart during phase 1 (the bulk upload and full-speed run)
-   and during phase 2 (the 20 viewers).
+   and during phase 2 (the viewers).
 
 A run that does not finish in ``--timeout`` seconds, or a viewer or poller that fails, ends
 the benchmark with an error instead of a figure.
 
     .venv/bin/python scripts/bench_service.py [--database-url URL] [--rows N] [--viewers N]
-        [--repeat 5] [--deflate] [--json]
+        [--encoding json|binary|both] [--live-seconds S] [--live-only] [--repeat 5]
+        [--deflate] [--json]
 
 Each figure is the median and the worst of ``--repeat`` rounds on one server (the machines
-are shared and noisy); ``--deflate`` turns on permessage-deflate (``MAPWISE_WS_DEFLATE``) to
-show what compressing once per viewer costs the live fan-out.
+are shared and noisy); ``--live-only`` skips phase 1 (the log is uploaded once);
+``--deflate`` turns on permessage-deflate (``MAPWISE_WS_DEFLATE``) to show what compressing
+once per viewer costs the live fan-out.
 """
 
 from __future__ import annotations
@@ -36,10 +43,12 @@ from typing import Any
 
 import httpx
 import numpy as np
+import psutil
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # the shared server helper, when run as scripts/bench_service.py
 
+from app.runs.frame_encoding import decode_binary  # noqa: E402
 from tests.support.server import Server, run_body  # noqa: E402
 
 SPEED = [750, 780, 1000, 1250, 1500, 1750, 2000, 2500, 3000, 3500, 4000, 4500]
@@ -95,20 +104,23 @@ def drive_run_body(dataset_id: int, **config: Any) -> dict[str, Any]:
     return run_body(dataset_id, signals={"y": "nox_ppm"}, table=table, **(noise | config))
 
 
-def viewer(url: str, seconds: float, counts: list[int], index: int) -> None:
+def viewer(url: str, seconds: float, counts: list[tuple[int, int]], index: int) -> None:
+    """Read and decode the stream for ``seconds``: (frames, bytes) into ``counts[index]``."""
     from websockets.sync.client import connect
 
     end = time.monotonic() + seconds
-    n = 0
-    with connect(url, max_size=None, open_timeout=30) as ws:
+    n = size = 0
+    with connect(url, max_size=None, open_timeout=60) as ws:
         while time.monotonic() < end:
             try:
-                message = json.loads(ws.recv(timeout=max(0.01, end - time.monotonic())))
+                data = ws.recv(timeout=max(0.01, end - time.monotonic()))
             except TimeoutError:
                 break
+            size += len(data)
+            message = json.loads(data) if isinstance(data, str) else decode_binary(data)
             if message["type"] in ("delta", "full"):
                 n += 1
-    counts[index] = n
+    counts[index] = (n, size)
 
 
 def poller(base: str, paths: list[str], stop: threading.Event, out: list[float]) -> None:
@@ -140,7 +152,7 @@ def latency_figures(phase: str, latencies: list[float]) -> dict[str, float]:
 
 
 # Figures where a larger value is better; for every other figure the worst is the largest.
-HIGHER_IS_BETTER = ("rows_per_s", "frames_per_s", "api_requests")
+HIGHER_IS_BETTER = ("rows_per_s", "frames_per_s", "mb_per_s", "api_requests")
 
 
 def warm_up(client: httpx.Client, server: Server, timeout: float) -> None:
@@ -189,36 +201,53 @@ def bulk_round(
     return figures, int(dataset["id"])
 
 
+def upload_once(client: httpx.Client, log_path: Path) -> int:
+    """The log as a dataset for ``--live-only`` (no figures: phase 1 measures the upload)."""
+    with log_path.open("rb") as f:
+        response = client.post("/api/datasets", files={"file": ("drive.csv", f)})
+    response.raise_for_status()
+    return int(response.json()["id"])
+
+
 def live_round(
-    client: httpx.Client, server: Server, dataset_id: int, args: argparse.Namespace
+    client: httpx.Client, server: Server, dataset_id: int, args: argparse.Namespace, encoding: str
 ) -> dict[str, Any]:
-    """Phase 2: a paced run watched by ``args.viewers`` viewers while 4 clients poll."""
+    """Phase 2: a paced run watched by ``args.viewers`` viewers reading ``encoding`` while 4
+    clients poll; the figures' names end with the encoding."""
     duration_s = args.rows / 100.0
     pace = duration_s / (args.live_seconds * 1.5)
     live = client.post("/api/runs", json=drive_run_body(dataset_id, pace=pace)).json()
     server.wait_run(live["id"], ("running",), args.timeout)
-    counts = [0] * args.viewers
-    ws_url = f"{server.ws_base}/api/runs/{live['id']}/stream"
+    counts = [(0, 0)] * args.viewers
+    ws_url = f"{server.ws_base}/api/runs/{live['id']}/stream?encoding={encoding}"
     threads = [Worker(viewer, ws_url, args.live_seconds, counts, i) for i in range(args.viewers)]
     latencies: list[float] = []
     stop = threading.Event()
     paths = [f"/api/runs/{live['id']}", "/api/datasets"]
     pollers = [Worker(poller, server.base, paths, stop, latencies) for _ in range(4)]
+    api = psutil.Process(server.process.pid)
+    cpu0, t0 = sum(api.cpu_times()[:2]), time.monotonic()
     for th in threads + pollers:
         th.start()
     for th in threads:
         th.result()
+    cpu1, t1 = sum(api.cpu_times()[:2]), time.monotonic()
+    loop_lag_ms = client.get("/api/health").json()["loop_lag_ms"]
     stop.set()
     for th in pollers:
         th.result()
     client.post(f"/api/runs/{live['id']}/cancel")
-    rates = [c / args.live_seconds for c in counts]
-    return {
+    rates = [n / args.live_seconds for n, _ in counts]
+    figures = {
         "frames_per_s_per_viewer_min": round(min(rates), 1),
         "frames_per_s_per_viewer_mean": round(statistics.mean(rates), 1),
         "frames_per_s_total": round(sum(rates), 1),
+        "mb_per_s_total": round(sum(b for _, b in counts) / args.live_seconds / 2**20, 2),
+        "api_cpu_pct": round(100 * (cpu1 - cpu0) / (t1 - t0), 1),
+        "loop_lag_ms": loop_lag_ms,
         **latency_figures("live", latencies),
     }
+    return {f"{key}_{encoding}": value for key, value in figures.items()}
 
 
 def summarise(rounds: list[dict[str, Any]]) -> dict[str, Any]:
@@ -236,8 +265,10 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--database-url", help="default: a fresh SQLite file")
     parser.add_argument("--rows", type=int, default=360_000)
-    parser.add_argument("--viewers", type=int, default=20)
+    parser.add_argument("--viewers", type=int, default=20, help="per paced run, at most 100")
+    parser.add_argument("--encoding", choices=["json", "binary", "both"], default="json")
     parser.add_argument("--live-seconds", type=float, default=20.0)
+    parser.add_argument("--live-only", action="store_true", help="skip the bulk phase")
     parser.add_argument("--repeat", type=int, default=5, help="rounds; median and worst")
     parser.add_argument("--deflate", action="store_true", help="MAPWISE_WS_DEFLATE=true")
     parser.add_argument("--timeout", type=float, default=600.0, help="per run, seconds")
@@ -245,6 +276,9 @@ def main() -> None:
     args = parser.parse_args()
     if args.repeat < 1:
         parser.error("--repeat must be at least 1")
+    if not 1 <= args.viewers <= 100:
+        parser.error("--viewers must be 1 to 100 (a run admits 100 viewers)")
+    encodings = ["json", "binary"] if args.encoding == "both" else [args.encoding]
     work = Path(tempfile.mkdtemp(prefix="mapwise-bench-"))
     url = args.database_url or f"sqlite:///{work / 'bench.db'}"
     log_path = work / "log.csv"
@@ -258,6 +292,8 @@ def main() -> None:
         "database": url.split(":")[0],
         "cpus": os.cpu_count(),
         "viewers": args.viewers,
+        "encodings": ",".join(encodings),
+        "live_seconds": args.live_seconds,
         "ws_deflate": args.deflate,
         "rounds": args.repeat,
     }
@@ -265,10 +301,18 @@ def main() -> None:
     try:
         with httpx.Client(base_url=server.base, timeout=600) as client:
             warm_up(client, server, args.timeout)
+            kept = upload_once(client, log_path) if args.live_only else None
             for _ in range(args.repeat):
-                bulk, dataset_id = bulk_round(client, server, log_path, args)
-                rounds.append(bulk | live_round(client, server, dataset_id, args))
-                client.delete(f"/api/datasets/{dataset_id}", params={"force": "true"})
+                figures: dict[str, Any] = {}
+                if kept is None:
+                    figures, dataset_id = bulk_round(client, server, log_path, args)
+                else:
+                    dataset_id = kept
+                for encoding in encodings:
+                    figures |= live_round(client, server, dataset_id, args, encoding)
+                rounds.append(figures)
+                if kept is None:
+                    client.delete(f"/api/datasets/{dataset_id}", params={"force": "true"})
         result["server_peak_rss_mb"] = peak_rss_mb(server.process.pid)
     finally:
         server.stop()

@@ -11,19 +11,21 @@ leaves the last map in place.
 
 Viewers are admitted within limits (per run, per client address, in all): past one,
 :meth:`LiveHub.subscribe` raises :class:`ViewerLimitError` saying which. A viewer's memory is
-its queue of at most ``VIEWER_QUEUE`` messages, each encoded once and shared by every viewer
-of the run. The hub knows which token each viewer came with, so a revoked token's viewers
-can be closed (:meth:`LiveHub.close_tokens`).
+its queue of at most ``VIEWER_QUEUE`` messages. Each viewer reads one encoding (``json`` or
+``binary``, :mod:`app.runs.frame_encoding`); a frame is encoded once per encoding that a
+viewer waiting for it reads, lazily, and every such viewer shares the same ``str`` or
+``bytes`` (:attr:`LiveHub.encodes` counts the encodings done). The hub knows which token each
+viewer came with, so a revoked token's viewers can be closed (:meth:`LiveHub.close_tokens`).
 """
 
 from __future__ import annotations
 
 import asyncio
-import json
 from dataclasses import dataclass, field
 from typing import Any
 
 from app.domain import FINISHED, RunStatus
+from app.runs.frame_encoding import ENCODINGS, Encoding, encode
 from app.runs.frames import StartMessage, StatusFrame, TickMessage, parse_message
 
 MAX_POINTS = 4000
@@ -67,15 +69,28 @@ class LiveState:
                 mine["values"] = mine["values"][::2]
 
 
-@dataclass(frozen=True, slots=True)
+Message = str | bytes  # one encoded frame, as a WebSocket text or binary message
+
+
+@dataclass(slots=True)
 class EncodedFull:
-    """A run's full frame encoded once for every viewer joining at the same point: ``key``
-    says which state it shows, ``status_text`` follows it when the run is finished."""
+    """A run's full frame, built once for every viewer joining at the same point and encoded
+    at most once per encoding (:meth:`messages`): ``key`` says which state it shows,
+    ``status_doc`` (the status frame) follows it when the run is finished."""
 
     key: tuple[Any, ...]
-    text: str
-    status_text: str | None
+    doc: dict[str, Any]
+    status_doc: dict[str, Any] | None
     status: str
+    encoded: dict[str, tuple[Message, Message | None]] = field(default_factory=dict)
+
+    def messages(self, hub: LiveHub, encoding: Encoding) -> tuple[Message, Message | None]:
+        """The full frame and the status frame (or ``None``) in ``encoding``."""
+        pair = self.encoded.get(encoding)
+        if pair is None:
+            status = None if self.status_doc is None else hub.encode(self.status_doc, encoding)
+            pair = self.encoded[encoding] = (hub.encode(self.doc, encoding), status)
+        return pair
 
 
 class ViewerLimitError(Exception):
@@ -90,11 +105,18 @@ class Viewer:
     """One WebSocket viewer: a bounded queue and a flag asking for a full frame; ``closed``
     is set when the hub ends the viewer (its token was revoked), ``close_reason`` says why."""
 
-    def __init__(self, run_id: int, client: str | None = None, token_id: int | None = None) -> None:
+    def __init__(
+        self,
+        run_id: int,
+        client: str | None = None,
+        token_id: int | None = None,
+        encoding: Encoding = "json",
+    ) -> None:
         self.run_id = run_id
         self.client = client
         self.token_id = token_id
-        self.queue: asyncio.Queue[str] = asyncio.Queue(maxsize=VIEWER_QUEUE)
+        self.encoding = encoding
+        self.queue: asyncio.Queue[Message] = asyncio.Queue(maxsize=VIEWER_QUEUE)
         self.needs_full = False
         self.wakeup = asyncio.Event()
         self.closed = asyncio.Event()
@@ -106,7 +128,12 @@ class Viewer:
         self.closed.set()
         self.wakeup.set()
 
-    def offer(self, message: str) -> None:
+    @property
+    def waiting(self) -> bool:
+        """Whether the next delta would be queued (not dropped for a due full frame)."""
+        return not self.needs_full and not self.closed.is_set()
+
+    def offer(self, message: Message) -> None:
         """Queue an encoded message; a full queue drops everything pending for a full frame."""
         if self.needs_full or self.closed.is_set():
             return
@@ -131,7 +158,7 @@ class Viewer:
         while not self.queue.empty():
             self.queue.get_nowait()
 
-    async def next(self) -> str | None:
+    async def next(self) -> Message | None:
         """The next encoded message to send, or ``None`` when a full frame is due; waits
         forever once the viewer is closed (whoever serves it watches ``closed``)."""
         while True:
@@ -165,6 +192,9 @@ class LiveHub:
         self.frames_in = 0
         self.frames_out = 0
         self.refused = 0
+        # Frames encoded, per encoding: one per frame and encoding in use, whatever the number
+        # of viewers (the tests count them).
+        self.encodes: dict[str, int] = dict.fromkeys(ENCODINGS, 0)
         # One encoded full frame per watched run: a hundred joiners cost one encoding, not a
         # hundred (the JSON of a full frame is the costliest thing the event loop does).
         self.full_frames: dict[int, EncodedFull] = {}
@@ -177,12 +207,22 @@ class LiveHub:
             lock = self._full_locks[run_id] = asyncio.Lock()
         return lock
 
+    def encode(self, doc: dict[str, Any], encoding: Encoding) -> Message:
+        """``doc`` as a message in ``encoding``, counted in :attr:`encodes`."""
+        self.encodes[encoding] += 1
+        return encode(doc, encoding)
+
     def keep_full(self, run_id: int, full: EncodedFull) -> None:
         if run_id in self.viewers:
             self.full_frames[run_id] = full
 
     def subscribe(
-        self, run_id: int, *, client: str | None = None, token_id: int | None = None
+        self,
+        run_id: int,
+        *,
+        client: str | None = None,
+        token_id: int | None = None,
+        encoding: Encoding = "json",
     ) -> Viewer:
         """A new viewer of ``run_id``; :class:`ViewerLimitError` past a limit.
 
@@ -199,7 +239,7 @@ class LiveHub:
             raise ViewerLimitError(
                 f"this client has its maximum of {self.max_per_client} live viewers"
             )
-        viewer = Viewer(run_id, client, token_id)
+        viewer = Viewer(run_id, client, token_id, encoding)
         self.viewers.setdefault(run_id, set()).add(viewer)
         if client is not None:
             self.by_client[client] = self.by_client.get(client, 0) + 1
@@ -281,27 +321,32 @@ class LiveHub:
         if gap:
             self._broadcast_resync(run_id)
             return
-        viewers = self.viewers.get(run_id, ())
-        if viewers:
-            text = encode(tick.delta().to_json())  # encoded once for every viewer
-            for viewer in viewers:
-                viewer.offer(text)
-                self.frames_out += 1
+        self.frames_out += self._fan_out(run_id, tick.delta().to_json())
 
     def _status(self, frame: StatusFrame) -> None:
         state = self.live.get(frame.run_id)
         if state is not None:
             state.status, state.error = frame.status, frame.error
-        text = encode(frame.to_json())
-        for viewer in self.viewers.get(frame.run_id, ()):
-            viewer.offer(text)
+        self._fan_out(frame.run_id, frame.to_json())
         if frame.status in FINISHED:
             self.live.pop(frame.run_id, None)
+
+    def _fan_out(self, run_id: int, doc: dict[str, Any]) -> int:
+        """Offer ``doc`` to the run's viewers, encoded once per encoding that a waiting viewer
+        reads (a viewer due for a full frame would drop it: it costs no encoding); returns
+        how many viewers it was offered to."""
+        encoded: dict[str, Message] = {}
+        offered = 0
+        for viewer in self.viewers.get(run_id, ()):
+            if not viewer.waiting:
+                continue
+            message = encoded.get(viewer.encoding)
+            if message is None:
+                message = encoded[viewer.encoding] = self.encode(doc, viewer.encoding)
+            viewer.offer(message)
+            offered += 1
+        return offered
 
     def _broadcast_resync(self, run_id: int) -> None:
         for viewer in self.viewers.get(run_id, ()):
             viewer.resync()
-
-
-def encode(frame: dict[str, Any]) -> str:
-    return json.dumps(frame, separators=(",", ":"))

@@ -2,10 +2,13 @@
  * Live run stream: a WebSocket client that reconnects with exponential backoff and resyncs
  * from the `full` frame the server sends first on every connection. Deltas that arrive
  * before a full frame (or out of order) are dropped, so the view never applies a delta to
- * stale state.
+ * stale state. It asks for the binary encoding (frame-codec.js: the maps and series as
+ * float32/float64 blocks, one encoding on the server shared by every viewer) and decodes each
+ * message into the object a JSON frame parses to; a text message is still read as JSON.
  */
 import { BACKOFF } from "./constants.js";
 import { wsUrl } from "./api.js";
+import { decodeFrame } from "./frame-codec.js";
 
 /** Close codes after which reconnecting cannot help (not found, auth, policy). */
 const FINAL_CLOSE = new Set([1008, 4001, 4003, 4004, 4401, 4403, 4404]);
@@ -58,7 +61,10 @@ export class LiveStream {
     this.emitConnection("connecting", { attempt: this.attempt });
     let socket;
     try {
-      socket = new WebSocket(wsUrl(this.path));
+      const url = new URL(wsUrl(this.path));
+      url.searchParams.set("encoding", "binary");
+      socket = new WebSocket(url);
+      socket.binaryType = "arraybuffer";
     } catch (err) {
       this.scheduleReconnect(String(err));
       return;
@@ -97,7 +103,7 @@ export class LiveStream {
   receive(raw) {
     let msg;
     try {
-      msg = JSON.parse(raw);
+      msg = raw instanceof ArrayBuffer ? decodeFrame(raw) : JSON.parse(raw);
     } catch {
       return;
     }

@@ -13,9 +13,11 @@ import uuid
 from pathlib import Path
 
 import httpx
+import numpy as np
 import pytest
-from playwright.sync_api import Page, WebSocketRoute, expect
+from playwright.sync_api import Page, WebSocket, WebSocketRoute, expect
 
+from app.runs.frame_encoding import decode_binary, encode_binary
 from tests.frontend.browser import plot_data, shot, upload_example, wait_run
 
 # Frame counts and rates over wall-clock windows, so alone, after the parallel phase.
@@ -140,7 +142,8 @@ def test_colour_scale_is_fixed_per_run_and_survives_a_reload(page: Page, api) ->
 class StreamProxy:
     """Routes the run's WebSocket through the test: it can drop a connection, and on the
     reconnection it slips a stale delta in before the server's full frame, marks the full
-    frame with a sentinel cell value and holds the following deltas back for a moment."""
+    frame with a sentinel cell value and holds the following deltas back for a moment. It
+    speaks the encoding the page asked for (the dashboard asks for ``binary``)."""
 
     SENTINEL = 4242.5
 
@@ -153,27 +156,32 @@ class StreamProxy:
         server = ws.connect_to_server()
         conn = {"ws": ws, "server": server, "n": len(self.connections) + 1, "received": []}
         conn["hold_until"] = 0.0
+        conn["binary"] = "encoding=binary" in ws.url
         with self.lock:
             self.connections.append(conn)
         if conn["n"] > 1:
             # A delta that does not belong to this connection: the client must ignore it
             # until a full frame has arrived.
-            ws.send(json.dumps({"type": "delta", "sample": 10**9, "values": [[-9999.0]]}))
+            stale = {"type": "delta", "sample": 10**9, "values": [[-9999.0]]}
+            ws.send(encode_binary(stale) if conn["binary"] else json.dumps(stale))
         ws.on_message(lambda message: server.send(message))
         server.on_message(lambda message: self.from_server(conn, message))
 
     def from_server(self, conn: dict, message: str | bytes) -> None:
-        text = message if isinstance(message, str) else message.decode()
-        msg = json.loads(text)
+        binary = isinstance(message, bytes)
+        assert binary == conn["binary"], "the server answered in another encoding"
+        msg = decode_binary(message) if binary else json.loads(message)
         conn["received"].append(msg.get("type"))
         if conn["n"] > 1 and msg.get("type") == "full" and conn["received"].count("full") == 1:
+            if binary:
+                msg["values"] = np.array(msg["values"])  # decoded arrays are read-only
             msg["values"][0][0] = self.SENTINEL
             conn["hold_until"] = time.monotonic() + self.hold_s
-            conn["ws"].send(json.dumps(msg))
+            conn["ws"].send(encode_binary(msg) if binary else json.dumps(msg))
             return
         if msg.get("type") == "delta" and time.monotonic() < conn["hold_until"]:
             return
-        conn["ws"].send(text)
+        conn["ws"].send(message)
 
     def drop(self, k: int) -> None:
         conn = self.connections[k]
@@ -274,3 +282,101 @@ def test_sixteen_by_sixteen_map_at_twenty_frames_per_second(page: Page, api) -> 
     assert applied <= sent * 1.05 + 1, "more map draws than frames: redraws without new data"
     assert rec["newPlot"] == 0, f"Plotly.newPlot called {rec['newPlot']} times"
     assert kept, "the map's SVG was rebuilt (a full re-plot) during the run"
+
+
+# In the page: the first message of the run's stream in each encoding, the binary one decoded
+# by the dashboard's own frame-codec.js.
+BOTH_ENCODINGS = """
+async (runId) => {
+  const { decodeFrame } = await import("/static/js/frame-codec.js");
+  const first = (encoding) =>
+    new Promise((resolve, reject) => {
+      const url = new URL(`/api/runs/${runId}/stream?encoding=${encoding}`, location.origin);
+      url.protocol = url.protocol === "https:" ? "wss:" : "ws:";
+      const ws = new WebSocket(url);
+      ws.binaryType = "arraybuffer";
+      ws.onmessage = (e) => {
+        ws.close();
+        resolve(typeof e.data === "string" ? JSON.parse(e.data) : decodeFrame(e.data));
+      };
+      ws.onerror = () => reject(new Error(`${encoding} stream failed`));
+    });
+  return { json: await first("json"), binary: await first("binary") };
+}
+"""
+
+DECODE = """
+async (bytes) => {
+  const { decodeFrame } = await import("/static/js/frame-codec.js");
+  return decodeFrame(new Uint8Array(bytes).buffer);
+}
+"""
+
+
+def same_in_float32(decoded, expected, path: str = "") -> None:
+    """The page's decoded binary frame equals the JSON frame, numbers to float32 precision
+    (the times are float64, so they are equal outright), ``null`` where JSON has ``null``."""
+    if isinstance(expected, dict):
+        assert isinstance(decoded, dict), path
+        assert decoded.keys() == expected.keys(), path
+        for key in expected:
+            same_in_float32(decoded[key], expected[key], f"{path}.{key}")
+    elif isinstance(expected, list):
+        assert isinstance(decoded, list), path
+        assert len(decoded) == len(expected), path
+        for k, (d, e) in enumerate(zip(decoded, expected, strict=True)):
+            same_in_float32(d, e, f"{path}[{k}]")
+    elif isinstance(expected, float) and isinstance(decoded, float | int):
+        assert decoded == float(np.float32(expected)) or decoded == expected, (path, decoded)
+    else:
+        assert decoded == expected, path
+
+
+def test_the_dashboard_reads_binary_frames_equal_to_the_json_frames(page: Page, api) -> None:
+    dataset = upload_example(api, f"binary-{uuid.uuid4().hex[:8]}")
+    run = start_paced_run(api, dataset["id"], pace=12)  # ~12 s of streaming
+    sockets: list = []
+    received: list[str | bytes] = []
+
+    def watch(ws: WebSocket) -> None:
+        sockets.append(ws)
+        ws.on("framereceived", lambda payload: received.append(payload))
+
+    page.on("websocket", watch)
+    page.goto(f"/runs/{run['id']}")
+    expect(page.locator("[data-run-status] .badge")).to_have_text("running", timeout=30_000)
+    _, drawn = sample_while_running(page, 3.0)
+    assert drawn, "no live map drawn"
+    # Drawn from float32 blocks: every cell is a float32 (a JSON frame's rarely would be).
+    cells = [v for z in drawn for row in json.loads(z) for v in row if v is not None]
+    assert all(float(np.float32(v)) == v for v in cells)
+    assert any(v != round(v) for v in cells)  # not all whole numbers
+    expect(page.locator("[data-run-status] .badge")).to_have_text("succeeded", timeout=60_000)
+    streams = [ws.url for ws in sockets if STREAM.search(ws.url)]
+    assert streams, "the page opened no stream"
+    assert all("encoding=binary" in url for url in streams), streams
+    assert received, "no stream frames"
+    assert all(isinstance(frame, bytes) for frame in received), "a text frame in binary mode"
+    # The final map on show is the run's (drawn transposed: rows along the 2nd axis).
+    final = api.get(f"/api/runs/{run['id']}/export", params={"format": "json"}).json()
+    z = plot_data(page, '[data-plot="map"]')[0]["z"]
+    same_in_float32([list(row) for row in zip(*z, strict=True)], final["values"])
+
+    both = page.evaluate(BOTH_ENCODINGS, run["id"])
+    assert both["json"]["type"] == "full"
+    assert both["json"]["values"] == final["values"]
+    assert len(both["json"]["series"]) > 0
+    same_in_float32(both["binary"], both["json"])
+
+    # NaN travels as NaN and is read back as null, absolute times keep their milliseconds.
+    frame = {
+        "type": "delta",
+        "values": [[1.5, None], [0.1, -7.25]],
+        "trajectory": {"time": [1.7e9 + 0.001, 1.7e9 + 0.002], "points": [[1.0, None]] * 2},
+        "series": {"u1": {"time": [0.0, 0.5], "values": [None, 2.0]}},
+        "metrics": {"rmse": None},
+    }
+    decoded = page.evaluate(DECODE, list(encode_binary(frame)))
+    same_in_float32(decoded, frame)
+    assert decoded["values"][0][1] is None
+    assert decoded["trajectory"]["time"] == frame["trajectory"]["time"]

@@ -8,6 +8,10 @@ missing or bad token, or a token without ``read`` is refused (close 1008, which 
 at the handshake). A viewer over a limit (per run, per client address, in all) is accepted
 and closed at once with 1013 "try again later" and the reason, which a browser can read.
 A revoked token's sockets are closed with 1008 within :data:`REVOCATION_CHECK_S`.
+
+``?encoding=binary`` asks for every message in the binary layout of
+:mod:`app.runs.frame_encoding` (``json``, the default, sends text); any other value is
+refused before the handshake completes (1008, the reason naming ``encoding``).
 """
 
 from __future__ import annotations
@@ -16,7 +20,7 @@ import asyncio
 import contextlib
 import logging
 import time
-from typing import Any
+from typing import Any, cast
 from urllib.parse import urlsplit
 
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
@@ -28,8 +32,9 @@ from app.config import Settings
 from app.domain import FINISHED, MapVersion, Run, Series
 from app.errors import AppError
 from app.io.decimate import nested_or_none
+from app.runs.frame_encoding import ENCODINGS, Encoding, encode
 from app.runs.frames import ErrorFrame, FullFrame, series_line
-from app.runs.hub import EncodedFull, LiveState, Viewer, ViewerLimitError, encode
+from app.runs.hub import EncodedFull, LiveState, Message, Viewer, ViewerLimitError
 
 router = APIRouter(tags=["live"])
 log = logging.getLogger("mapwise")
@@ -117,10 +122,10 @@ def _reusable(full: EncodedFull | None, live: LiveState | None) -> bool:
 
 
 async def _full(services: Services, run_id: int) -> EncodedFull:
-    """The run's full frame, encoded: from the hub's live state while the run executes (one
-    small query for the run document), else from the stored version and series. Viewers
-    joining at the same point share one build and skip the database
-    (:attr:`LiveHub.full_frames`): a hundred joiners cost one query and one encoding."""
+    """The run's full frame: from the hub's live state while the run executes (one small
+    query for the run document), else from the stored version and series. Viewers joining at
+    the same point share one build and skip the database (:attr:`LiveHub.full_frames`): a
+    hundred joiners cost one query and one encoding per encoding they read."""
     hub = services.hub
     if _reusable(hub.full_frames.get(run_id), hub.state(run_id)):
         return hub.full_frames[run_id]
@@ -140,8 +145,8 @@ async def _full(services: Services, run_id: int) -> EncodedFull:
             )
         full = EncodedFull(
             key=key,
-            text=encode(frame.to_json()),
-            status_text=encode(frame.status().to_json()) if status in FINISHED else None,
+            doc=frame.to_json(),
+            status_doc=frame.status().to_json() if status in FINISHED else None,
             status=status,
         )
         hub.keep_full(run_id, full)
@@ -157,6 +162,11 @@ async def stream_run(websocket: WebSocket, run_id: int) -> None:
         # them: without this check any site a user visits could watch their runs.
         await websocket.close(code=CLOSE_POLICY, reason="origin not allowed")
         return
+    encoding = websocket.query_params.get("encoding", "json")
+    if encoding not in ENCODINGS:
+        reason = f"encoding: must be one of {', '.join(ENCODINGS)}, not {encoding[:20]!r}"
+        await websocket.close(code=CLOSE_POLICY, reason=reason)
+        return
     secret = websocket.query_params.get("token")
     try:
         if services.settings.auth_required:
@@ -169,7 +179,9 @@ async def stream_run(websocket: WebSocket, run_id: int) -> None:
         return
     client = websocket.client.host if websocket.client else None
     try:
-        viewer = services.hub.subscribe(run_id, client=client, token_id=caller.token_id)
+        viewer = services.hub.subscribe(
+            run_id, client=client, token_id=caller.token_id, encoding=cast(Encoding, encoding)
+        )
     except ViewerLimitError as exc:
         # Accepted first: a close before the handshake is a bare 403 a browser cannot read.
         await websocket.accept()
@@ -188,11 +200,11 @@ async def _serve(websocket: WebSocket, services: Services, viewer: Viewer, run_i
     try:
         full = await _full(services, run_id)
     except AppError as exc:
-        await websocket.send_json(ErrorFrame(exc.body()["error"]).to_json())
+        await _send(websocket, encode(ErrorFrame(exc.body()["error"]).to_json(), viewer.encoding))
         await websocket.close(code=CLOSE_NOT_FOUND)
         return
     viewer.reset()
-    await _send_full(websocket, full)
+    await _send_full(websocket, services, viewer, full)
     receiver = asyncio.create_task(_drain_client(websocket))
     sender = asyncio.create_task(_send_loop(websocket, services, viewer, run_id))
     closed = asyncio.create_task(viewer.closed.wait())
@@ -263,12 +275,22 @@ async def _send_loop(websocket: WebSocket, services: Services, viewer: Any, run_
             if message is None:
                 full = await _full(services, run_id)
                 viewer.reset()  # deltas queued meanwhile are already in the frame
-                await _send_full(websocket, full)
+                await _send_full(websocket, services, viewer, full)
                 continue
-            await websocket.send_text(message)
+            await _send(websocket, message)
 
 
-async def _send_full(websocket: WebSocket, full: EncodedFull) -> None:
-    await websocket.send_text(full.text)
-    if full.status_text is not None:
-        await websocket.send_text(full.status_text)
+async def _send_full(
+    websocket: WebSocket, services: Services, viewer: Viewer, full: EncodedFull
+) -> None:
+    frame, status = full.messages(services.hub, viewer.encoding)
+    await _send(websocket, frame)
+    if status is not None:
+        await _send(websocket, status)
+
+
+async def _send(websocket: WebSocket, message: Message) -> None:
+    if isinstance(message, bytes):
+        await websocket.send_bytes(message)
+    else:
+        await websocket.send_text(message)
