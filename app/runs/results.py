@@ -34,7 +34,7 @@ from app.io.decimate import minmax_decimate
 from app.io.payload import Truth
 from app.runs.gates import GateResult, cell_counts, nearest_cell
 from estimation.errors import EstimationError
-from estimation.estimator import Snapshot
+from estimation.estimator import Estimator, Snapshot
 from estimation.holdout import holdout_error
 from estimation.metrics import running_ise, score_run, torque_window
 from estimation.registry import EstimatorKind, EstimatorSpec
@@ -46,6 +46,29 @@ STATUS_ACCEPTED = 0
 # code 1, the accept mask, is counted by the gate that set it).
 CELL_STATUS = {"innovation": 2, "delay": 3}
 STATUS_KEY = "__status__"  # the status codes' name in a persisted segment
+
+
+def channels_read(run: Run, estimator: Estimator, truth: Truth | None) -> list[str]:
+    """Every channel of the log a run reads, so its worker loads no other: the estimator's
+    (:meth:`~estimation.estimator.Estimator.required_signals` and its signal roles, whose
+    ``axis`` names the grid of its snapshots' tables), the operating channels and measured
+    output :meth:`RunResults.lines` shows, and the truth's map inputs (scoring points of an
+    older truth). The sample gates' channels are the worker's to add."""
+    names = list(estimator.required_signals())
+    names += [name for role in estimator.signal_roles().values() for name in role]
+    names += _run_operating_channels(run)
+    output = run.estimator_config.get("output")
+    if isinstance(output, str):
+        names.append(output)
+    if truth is not None:
+        names += list(truth.map_inputs)
+    return list(dict.fromkeys(names))
+
+
+def _run_operating_channels(run: Run) -> list[str]:
+    """The operating-point channels a run names: its table's axes, else its signal roles."""
+    table = run.table
+    return [a["name"] for a in table["axes"]] if table else list(run.signals.values())
 
 
 class RunResults:
@@ -255,11 +278,13 @@ class RunResults:
         estimator that counts the mask that is ``Σ`` of its reasons in :meth:`run_rejected`
         (``gate:*`` split ``mask``). Min/max decimation keeps a 1 in every bucket that has one.
         """
-        done = self.status >= 0
-        hit = self.status > 0
+        # Built in place: one float array and one boolean temporary, whatever the log's length
+        # (called for every live frame).
+        mask = (self.status > 0).astype(np.float64)
         if self.gates is not None:
-            hit = hit | ~self.gates.accept
-        return np.where(done, hit.astype(np.float64), np.nan)
+            mask[~self.gates.accept] = 1.0
+        mask[self.status < 0] = np.nan
+        return mask
 
     def series(self, points: int) -> list[Series]:
         """:meth:`lines` at most ``points`` samples long, for storage: min/max per bucket
@@ -276,8 +301,7 @@ class RunResults:
         return self.spec.output_units.get(name, "") or out_unit
 
     def _operating_channels(self) -> list[str]:
-        table = self.run.table
-        names = [a["name"] for a in table["axes"]] if table else list(self.run.signals.values())
+        names = _run_operating_channels(self.run)
         if not names and self.grid is not None:
             names = [a.name for a in self.grid.axes]
         return [name for name in dict.fromkeys(names) if name in self.signals]

@@ -2,7 +2,8 @@
 
 The worker reads everything it needs from the database (the run, its dataset's row, the
 last persisted version when resuming) and the artifact store (the dataset's samples, their
-hash checked) and writes its results to the database, so it can run in any process sharing
+hash checked, only the channels the run reads: :func:`~app.runs.results.channels_read` and
+the gates') and writes its results to the database, so it can run in any process sharing
 both. :class:`RunSession` only orchestrates, per chunk: fold the
 estimator's snapshot into the results (:mod:`app.runs.results`), persist a map version at
 the run's cadence with the estimator state, so a resumed run continues bit-for-bit
@@ -30,7 +31,7 @@ from app.runs.gates import apply_gates, parse_gates
 from app.runs.limits import out_of_memory_message
 from app.runs.live import LiveTicks, Publish
 from app.runs.options import run_options
-from app.runs.results import RunResults
+from app.runs.results import RunResults, channels_read
 from app.store import default_store_url, load_signals, open_store
 from estimation.estimator import Snapshot
 from estimation.registry import get_spec, load_state
@@ -56,6 +57,16 @@ class WorkerContext:
     take_over: bool = False  # claim a run left running by a dead attempt (a Dask retry)
     run_max_s: float | None = None  # wall-clock budget of an attempt (MAPWISE_RUN_MAX_S)
     run_memory_mb: float | None = None  # the memory limit a run executes under (its message)
+
+
+def gate_channels(config: dict[str, Any]) -> list[str]:
+    """The channels a run's gates name, read leniently: a malformed gate list fails later,
+    in :func:`run_options` and :func:`parse_gates`, with the message planning gives."""
+    gates = config.get("gates")
+    if not isinstance(gates, list):
+        return []
+    named = (g.get("channel") for g in gates if isinstance(g, dict))
+    return [name for name in named if isinstance(name, str)]
 
 
 class StopRun(Exception):  # noqa: N818 - control flow, not an error
@@ -154,17 +165,20 @@ class RunSession:
     def _prepare(self) -> None:
         loaded = self.attempt.load()
         self.run, dataset = loaded.run, loaded.dataset
-        signals = load_signals(open_store(self.ctx.store_url), loaded.samples, dataset.channels)
         truth = None if loaded.truth is None else unpack_truth(loaded.truth)
+        spec = get_spec(self.run.estimator)
+        self.estimator = spec.build(self.run.estimator_config)
+        names = channels_read(self.run, self.estimator, truth) + gate_channels(self.run.config)
+        store = open_store(self.ctx.store_url)
+        signals = load_signals(store, loaded.samples, dataset.channels, names)
         self.rate_hz = dataset.rate_hz
         self.options = run_options(
             self.run.config, len(signals), dataset.rate_hz, self.ctx.version_fraction
         )
-        spec = get_spec(self.run.estimator)
-        self.estimator = spec.build(self.run.estimator_config)
         gates = None
         if self.options.gates:
-            parsed = parse_gates(self.options.gates, signals.names, field="config.gates")
+            known = [c.name for c in dataset.channels]
+            parsed = parse_gates(self.options.gates, known, field="config.gates")
             gates = apply_gates(parsed, signals)
         self.accept = None if gates is None else gates.accept
         self.results = RunResults(self.run, spec, dataset, signals, truth, gates)

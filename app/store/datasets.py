@@ -1,10 +1,12 @@
 """Datasets' samples in the store: staged to a file, stored under a key, loaded and verified.
 
 A dataset's object is ``datasets/<id>-<sha16>-<nonce>.parquet`` (:func:`dataset_key`); the
-database row keeps the key and the file's SHA-256. Loading reads the object once, checks the
-hash, then decodes it (:mod:`app.store.parquet_signals`), so a changed or truncated file never
-reaches an estimator. The nonce keeps two databases sharing a store (a restored backup, a
-test suite) from ever writing or deleting each other's objects.
+database row keeps the key and the file's SHA-256. Loading streams the object through the
+hash, then, through the same handle, decodes only the channels asked for
+(:mod:`app.store.parquet_signals`, column projection): a changed or truncated file never
+reaches an estimator, and a run holds only the channels it uses, never the file's bytes.
+The nonce keeps two databases sharing a store (a restored backup, a test suite) from ever
+writing or deleting each other's objects.
 """
 
 from __future__ import annotations
@@ -15,16 +17,18 @@ import logging
 import os
 import secrets
 import tempfile
-from collections.abc import Iterator, Sequence
+from collections.abc import Collection, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
+import pyarrow as pa
 
 from app.domain import Channel, StoredSamples
 from app.store.errors import ArtifactCorruptError, ArtifactMissingError
 from app.store.objects import ArtifactStore
-from app.store.parquet_signals import Column, read_columns, write_columns
+from app.store.parquet_signals import HASH_CHUNK, Column, SignalsFile, write_columns
 from estimation.signals import Signals
 
 log = logging.getLogger("mapwise.store")
@@ -77,56 +81,87 @@ def save_staged(store: ArtifactStore, dataset_id: int, staged: StagedDataset) ->
     return key
 
 
-def read_verified(store: ArtifactStore, dataset_id: int, key: str, sha256: str) -> bytes:
-    """The object's bytes, after checking they hash to ``sha256``."""
+@contextlib.contextmanager
+def open_verified(
+    store: ArtifactStore, dataset_id: int, key: str, sha256: str
+) -> Iterator[BinaryIO]:
+    """The object, open for reading at its start, after checking its bytes hash to ``sha256``.
+
+    The hash streams over the file in blocks (:data:`HASH_CHUNK`), so checking a file never
+    holds it; the caller then reads what it needs through the same handle. A dataset's key
+    is never written twice (each put has a new nonce) and, on a local disk, an open handle
+    keeps the file it opened, so what is decoded is what was hashed.
+    """
     where = store.location(key)
     try:
-        data = store.read_bytes(key)
+        f = store.open(key)
     except FileNotFoundError as exc:
         raise ArtifactMissingError(
             f"dataset {dataset_id}: its samples {key} are missing from the store ({where})",
             field="dataset_id",
         ) from exc
-    actual = hashlib.sha256(data).hexdigest()
-    if actual != sha256:
-        raise ArtifactCorruptError(
-            f"dataset {dataset_id}: its samples {key} in the store ({where}) have SHA-256 "
-            f"{actual[:16]}…, not the {sha256[:16]}… stored with the dataset",
-            field="dataset_id",
-        )
-    return data
+    with f:
+        digest = hashlib.sha256()
+        while block := f.read(HASH_CHUNK):
+            digest.update(block)
+        actual = digest.hexdigest()
+        if actual != sha256:
+            raise ArtifactCorruptError(
+                f"dataset {dataset_id}: its samples {key} in the store ({where}) have SHA-256 "
+                f"{actual[:16]}…, not the {sha256[:16]}… stored with the dataset",
+                field="dataset_id",
+            )
+        f.seek(0)
+        yield f
 
 
 def load_columns(
-    store: ArtifactStore, dataset_id: int, key: str, sha256: str
+    store: ArtifactStore,
+    dataset_id: int,
+    key: str,
+    sha256: str,
+    names: Collection[str] | None = None,
+    *,
+    expect: Sequence[str] | None = None,
 ) -> tuple[np.ndarray, list[Column]]:
-    """The verified object's time and channel columns."""
-    data = read_verified(store, dataset_id, key, sha256)
-    try:
-        return read_columns(data)
-    except (ValueError, OSError) as exc:  # right hash, wrong content: written by a bad writer
-        raise ArtifactCorruptError(
-            f"dataset {dataset_id}: its samples {key} cannot be decoded: {exc}",
-            field="dataset_id",
-        ) from exc
+    """The verified object's time and channel columns: those in ``names`` (default all), in
+    the file's order, the others never read. With ``expect``, the file's channels must be
+    exactly those names in that order (ArtifactCorruptError otherwise)."""
+    with open_verified(store, dataset_id, key, sha256) as f:
+        try:
+            file = SignalsFile.open(f)
+            stored = [name for name, _ in file.channels]
+            if expect is not None and stored != list(expect):
+                raise ArtifactCorruptError(
+                    f"dataset {dataset_id}: its samples {key} hold channels {stored}, "
+                    f"not the dataset's {list(expect)}",
+                    field="dataset_id",
+                )
+            return file.read(names)
+        except (ValueError, OSError, pa.ArrowException) as exc:
+            # right hash, wrong content: written by a bad writer
+            raise ArtifactCorruptError(
+                f"dataset {dataset_id}: its samples {key} cannot be decoded: {exc}",
+                field="dataset_id",
+            ) from exc
 
 
 def load_signals(
-    store: ArtifactStore, stored: StoredSamples, channels: Sequence[Channel]
+    store: ArtifactStore,
+    stored: StoredSamples,
+    channels: Sequence[Channel],
+    names: Collection[str] | None = None,
 ) -> Signals:
-    """The dataset's samples, with the channels' names, order and units of its row."""
+    """The dataset's samples, with the channels' names, order and units of its row; only
+    the channels in ``names`` (default all; a name the dataset lacks is ignored, so the
+    estimator's own check names it)."""
     dataset_id, key = stored.dataset_id, stored.key
-    time, columns = load_columns(store, dataset_id, key, stored.sha256)
-    names = [c.name for c in columns]
-    if names != [c.name for c in channels]:
-        raise ArtifactCorruptError(
-            f"dataset {dataset_id}: its samples {key} hold channels {names}, "
-            f"not the dataset's {[c.name for c in channels]}",
-            field="dataset_id",
-        )
+    expect = [c.name for c in channels]
+    time, columns = load_columns(store, dataset_id, key, stored.sha256, names, expect=expect)
     by_name = {c.name: c.values for c in columns}
     del columns
-    return Signals(time, by_name, {c.name: c.unit for c in channels}, copy=False)
+    units = {c.name: c.unit for c in channels if c.name in by_name}
+    return Signals(time, by_name, units, copy=False)
 
 
 def delete_dataset(store: ArtifactStore, dataset_id: int, key: str) -> bool:

@@ -3,7 +3,8 @@
 A put never leaves a partial object under its final key: the bytes go to a hidden temporary
 key in the same directory first, then are moved into place (a rename on a local disk; on an
 object store, where a move is a copy, the copy appears whole or not at all). Reads take an
-object in one piece, so its hash and its decoding share a single read.
+object whole (:meth:`read_bytes`) or through a handle (:meth:`open`, for a hash and a
+decoding in one pass each without holding the bytes).
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ import os
 import secrets
 from functools import lru_cache
 from pathlib import Path
+from typing import BinaryIO
 
 import fsspec
 from fsspec.implementations.local import LocalFileSystem
@@ -65,6 +67,10 @@ class ArtifactStore:
         except BaseException:
             self._discard(temporary)
             raise
+
+    def open(self, key: str) -> BinaryIO:
+        """The object, open for binary reading; FileNotFoundError when there is none."""
+        return self.fs.open(self.path(key), "rb")
 
     def read_bytes(self, key: str) -> bytes:
         """The whole object; FileNotFoundError when there is none."""

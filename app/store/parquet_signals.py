@@ -12,8 +12,9 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass
+from typing import BinaryIO
 
 import numpy as np
 import pyarrow as pa
@@ -73,22 +74,64 @@ def file_sha256(path: str | os.PathLike[str]) -> str:
     return digest.hexdigest()
 
 
-def read_columns(data: bytes) -> tuple[np.ndarray, list[Column]]:
-    """The time and the channels of a file's bytes (one column decoded at a time, so the
-    peak is the file plus the arrays); ValueError when it is not this format."""
-    reader = pq.ParquetFile(pa.BufferReader(data))
-    schema = reader.schema_arrow
-    meta = json.loads((schema.metadata or {}).get(SCHEMA_KEY, b"{}"))
-    if meta.get("format") != FORMAT or schema.names[:1] != [meta.get("time")]:
-        raise ValueError(f"not a {FORMAT} file (schema metadata {meta})")
-    arrays = []
-    for field in schema:
-        column = reader.read(columns=[field.name], use_threads=False).column(0)
-        arrays.append(np.ascontiguousarray(column.to_numpy(), dtype=np.float64))
-    if any(a.size != meta["rows"] for a in arrays):
-        raise ValueError(f"a column is not {meta['rows']} rows long")
-    channels = [
-        Column(f.name, (f.metadata or {}).get(b"unit", b"").decode(), a)
-        for f, a in zip(list(schema)[1:], arrays[1:], strict=True)
-    ]
-    return arrays[0], channels
+@dataclass(frozen=True, slots=True)
+class SignalsFile:
+    """An open file of this format: its row count and channels (name, unit) in order, read
+    from the footer; :meth:`read` decodes the time and the channels asked for."""
+
+    reader: pq.ParquetFile
+    time_name: str
+    rows: int
+    channels: list[tuple[str, str]]
+
+    @classmethod
+    def open(cls, source: pa.NativeFile | BinaryIO | bytes) -> SignalsFile:
+        """ValueError when the file is not this format."""
+        if isinstance(source, bytes | bytearray | memoryview):
+            source = pa.BufferReader(source)
+        reader = pq.ParquetFile(source, pre_buffer=False)
+        schema = reader.schema_arrow
+        meta = json.loads((schema.metadata or {}).get(SCHEMA_KEY, b"{}"))
+        if meta.get("format") != FORMAT or schema.names[:1] != [meta.get("time")]:
+            raise ValueError(f"not a {FORMAT} file (schema metadata {meta})")
+        if reader.metadata.num_rows != meta["rows"]:
+            raise ValueError(f"the file has {reader.metadata.num_rows} rows, not {meta['rows']}")
+        channels = [(f.name, (f.metadata or {}).get(b"unit", b"").decode()) for f in schema]
+        return cls(reader, meta["time"], int(meta["rows"]), channels[1:])
+
+    def read(self, names: Collection[str] | None = None) -> tuple[np.ndarray, list[Column]]:
+        """The time and the channels in ``names`` (default: all), in the file's order.
+
+        Only those columns' chunks are read and decompressed (column projection), one row
+        group at a time into arrays allocated once: the peak is the arrays plus one row
+        group of the chosen columns, whatever the file's other channels hold.
+        """
+        wanted = None if names is None else set(names)
+        chosen = [c for c in self.channels if wanted is None or c[0] in wanted]
+        fields = [self.time_name] + [name for name, _ in chosen]
+        arrays = [np.empty(self.rows, dtype=np.float64) for _ in fields]
+        start = 0
+        batches = self.reader.iter_batches(
+            batch_size=ROW_GROUP_ROWS, columns=fields, use_threads=False
+        )
+        for batch in batches:
+            stop = start + batch.num_rows
+            if stop > self.rows:
+                raise ValueError(f"the columns are longer than {self.rows} rows")
+            for array, column in zip(arrays, batch.columns, strict=True):
+                if column.null_count:
+                    raise ValueError(f"a column has {column.null_count} missing values")
+                array[start:stop] = column.to_numpy(zero_copy_only=False)
+            start = stop
+        if start != self.rows:
+            raise ValueError(f"the columns are {start} rows long, not {self.rows}")
+        columns = [Column(n, u, a) for (n, u), a in zip(chosen, arrays[1:], strict=True)]
+        return arrays[0], columns
+
+
+def read_columns(
+    source: pa.NativeFile | BinaryIO | bytes, names: Collection[str] | None = None
+) -> tuple[np.ndarray, list[Column]]:
+    """The time and the channels (those in ``names``, default all) of a file or its bytes;
+    ValueError when it is not this format."""
+    return SignalsFile.open(source).read(names)

@@ -1,0 +1,205 @@
+"""Peak memory of one run's worker on a wide log: ROWS × CHANNELS, the run reading three.
+
+    .venv/bin/python scripts/run_memory.py --rows 2000000 --channels 12
+
+builds a SQLite database and an artifact store in a temporary directory, stores a dataset
+of ``u1 [rpm]``, ``u2 [mg/stroke]`` and ``y [ppm]`` (the 4×4 map of the service tests,
+plus noise) and ``CHANNELS − 3`` further noise channels, plans an ``skf`` run on it as
+``POST /api/runs`` would, and executes that run in a fresh worker process
+(:func:`app.runs.worker.execute_run`). The worker first executes the same run on a short
+log (imports, JIT compilation, database connections), then resets its peak resident set
+(``/proc/self/clear_refs``) and executes the measured run: the printed growth is its peak
+``VmHWM`` minus its ``VmRSS`` before the run, what the run itself needed at its largest.
+``--code DIR`` executes the worker from another checkout (e.g. ``git archive HEAD`` unpacked
+there), to compare before and after a change.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from app.db.engine import Database
+from app.db.migrate import upgrade
+from app.db.repositories import DatasetRepo, RunRepo
+from app.domain import Channel
+from app.services.run_plan import RunRequest, plan_run
+from app.store import open_store, save_staged, stage_signals
+from estimation.signals import Signals
+from estimation.table import Axis, Table
+from tests.support.server import U1, U2, run_body
+
+ROOT = Path(__file__).resolve().parents[1]
+MIB = 1024 * 1024
+USED = ("u1", "u2", "y")  # what the planned run reads: its table's axes and its output
+RATE_HZ = 100.0
+
+_WORKER = """
+import gc, json, sys
+from pathlib import Path
+from app.runs.worker import WorkerContext, execute_run
+
+def kib(field):
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith(field + ":"):
+            return int(line.split()[1])
+    raise OSError(field)
+
+url, store, warm, run = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
+context = WorkerContext(database_url=url, store_url=store, live_fps=1.0)
+warmed = execute_run(warm, context)
+gc.collect()
+Path("/proc/self/clear_refs").write_text("5")  # VmHWM := VmRSS (Linux >= 4.0)
+before = kib("VmRSS")
+status = execute_run(run, context)
+print(json.dumps({"warm": warmed, "status": status, "before_kib": before,
+                  "peak_kib": kib("VmHWM")}))
+"""
+
+
+@dataclass(frozen=True, slots=True)
+class Workbench:
+    """A database and a store holding a short run (to warm a worker) and the measured one."""
+
+    database_url: str
+    store_url: str
+    warm_run: int
+    run: int
+    log_bytes: int  # the measured dataset's time and channels as float64 arrays
+
+
+@dataclass(frozen=True, slots=True)
+class Peak:
+    status: str
+    before_bytes: int
+    peak_bytes: int
+
+    @property
+    def growth_bytes(self) -> int:
+        return self.peak_bytes - self.before_bytes
+
+
+def wide_log(rows: int, channels: int, seed: int = 0) -> Signals:
+    """``u1``, ``u2``, ``y = map(u1, u2) + noise`` and ``channels − 3`` noise channels
+    ``x03``, ``x04``, … (random: they compress no better than measured channels)."""
+    if channels < len(USED):
+        raise ValueError(f"a wide log has at least {len(USED)} channels, not {channels}")
+    rng = np.random.default_rng(seed)
+    true_map = Table(
+        [Axis("u1", "rpm", U1), Axis("u2", "mg/stroke", U2)],
+        np.add.outer(np.array([1.0, 2.0, 3.5, 3.0]), np.array([0.0, 0.5, 1.5, 1.0])),
+    )
+    u = np.column_stack([rng.uniform(400, 3600, rows), rng.uniform(-5, 65, rows)])
+    data = {"u1": u[:, 0].copy(), "u2": u[:, 1].copy()}
+    data["y"] = true_map.evaluate(u) + rng.normal(0.0, 0.05, rows)
+    del u
+    for i in range(len(USED), channels):
+        data[f"x{i:02d}"] = rng.normal(0.0, 1.0, rows)
+    units = {"u1": "rpm", "u2": "mg/stroke", "y": "ppm"}
+    return Signals(np.arange(rows) / RATE_HZ, data, units, copy=False)
+
+
+def _add_dataset(db: Database, store_url: str, signals: Signals, name: str) -> int:
+    store = open_store(store_url)
+    with stage_signals(store, signals) as staged, db.write() as s:
+        repo = DatasetRepo(s)
+        dataset = repo.add(
+            name=name,
+            source="csv",
+            rows=len(signals),
+            rate_hz=RATE_HZ,
+            duration_s=float(signals.time[-1] - signals.time[0]),
+            time_column="time",
+            channels=[Channel(n, signals.units.get(n, "")) for n in signals.names],
+        )
+        repo.attach_samples(dataset.id, save_staged(store, dataset.id, staged), staged.sha256)
+        return dataset.id
+
+
+def _add_run(db: Database, dataset_id: int) -> int:
+    """An ``skf`` run on the dataset, planned as ``POST /api/runs`` plans it."""
+    with db.write() as s:
+        dataset = DatasetRepo(s).get(dataset_id)
+        plan = plan_run(RunRequest(**run_body(dataset_id)), dataset, None, version_fraction=0.1)
+        run = RunRepo(s).add(
+            dataset_id=dataset_id,
+            name=plan.name,
+            estimator=plan.estimator,
+            signals=plan.signals,
+            table_spec=plan.table_spec,
+            config=plan.config,
+            estimator_config=plan.estimator_config,
+            produces_map=plan.produces_map,
+            n_samples=plan.n_samples,
+            base_map_id=None,
+        )
+        return run.id
+
+
+def workbench(directory: Path, rows: int, channels: int) -> Workbench:
+    """The database (SQLite) and store under ``directory``, with both runs queued."""
+    database_url = f"sqlite:///{directory / 'mapwise.db'}"
+    store_url = (directory / "store").as_uri()
+    upgrade(database_url, store_url=store_url)
+    db = Database(database_url)
+    try:
+        warm = _add_dataset(db, store_url, wide_log(4000, channels, seed=1), "warm-up")
+        signals = wide_log(rows, channels)
+        log_bytes = (len(signals.names) + 1) * len(signals) * 8
+        measured = _add_dataset(db, store_url, signals, "wide")
+        del signals
+        return Workbench(
+            database_url, store_url, _add_run(db, warm), _add_run(db, measured), log_bytes
+        )
+    finally:
+        db.dispose()
+
+
+def worker_peak(bench: Workbench, code: Path = ROOT, timeout_s: float = 600.0) -> Peak:
+    """Execute the measured run in a fresh worker process (module docstring)."""
+    env = os.environ | {"PYTHONPATH": str(code), "OPENBLAS_NUM_THREADS": "1"}
+    args = [bench.database_url, bench.store_url, str(bench.warm_run), str(bench.run)]
+    done = subprocess.run(
+        [sys.executable, "-c", _WORKER, *args],
+        capture_output=True,
+        text=True,
+        cwd=code,
+        env=env,
+        timeout=timeout_s,
+        check=False,
+    )
+    if done.returncode != 0:
+        raise RuntimeError(f"the worker exited {done.returncode}: {done.stderr[-2000:]}")
+    out = json.loads(done.stdout.strip().splitlines()[-1])
+    if out["warm"] != "succeeded":
+        raise RuntimeError(f"the warm-up run {out['warm']}")
+    return Peak(out["status"], out["before_kib"] * 1024, out["peak_kib"] * 1024)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--rows", type=int, default=2_000_000)
+    parser.add_argument("--channels", type=int, default=12)
+    parser.add_argument("--code", type=Path, default=ROOT, help="the checkout to execute")
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory(prefix="mapwise-run-memory-") as tmp:
+        bench = workbench(Path(tmp), args.rows, args.channels)
+        peak = worker_peak(bench, args.code.resolve())
+    print(
+        f"{args.rows} rows × {args.channels} channels ({bench.log_bytes / MIB:.0f} MiB as "
+        f"float64), skf on {', '.join(USED)}: run {peak.status}, worker RSS "
+        f"{peak.before_bytes / MIB:.0f} MiB before the run, peak {peak.peak_bytes / MIB:.0f} "
+        f"MiB: +{peak.growth_bytes / MIB:.0f} MiB"
+    )
+
+
+if __name__ == "__main__":
+    main()
