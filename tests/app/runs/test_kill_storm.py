@@ -20,6 +20,11 @@ KILLS = 50
 RUNS = 12
 
 
+def _count(server: Server, status: str) -> int:
+    """How many runs of the server have ``status``."""
+    return int(server.get("/api/runs", params={"status": status})["total"])
+
+
 @pytest.mark.slow
 def test_fifty_worker_kills_lose_and_double_nothing(backend: str, fresh_url, tmp_path: Any) -> None:  # type: ignore[no-untyped-def]
     env = {
@@ -40,8 +45,12 @@ def test_fifty_worker_kills_lose_and_double_nothing(backend: str, fresh_url, tmp
         while kills < KILLS:
             assert time.monotonic() < deadline, server.output()
             if kills % 2:  # every other kill hits a worker while a run is executing
-                while server.get("/api/runs", params={"status": "running"})["total"] == 0:
+                while _count(server, "running") == 0:
                     assert time.monotonic() < deadline, server.output()
+                    if _count(server, "queued") == _count(server, "running") == 0:
+                        # Every run finished before the kills did: one more for them to hit
+                        # (waiting for a running run would otherwise wait forever).
+                        ids.append(int(start_run(server.http, body)["id"]))
                     time.sleep(0.02)
                 time.sleep(rng.uniform(0.0, 0.4))  # anywhere in it: a chunk, a version write
             else:  # the others at any moment, start-up of the new pool included
@@ -67,6 +76,6 @@ def test_fifty_worker_kills_lose_and_double_nothing(backend: str, fresh_url, tmp
             assert steps == sorted(set(steps)), steps  # nothing written twice
             assert [v["final"] for v in versions].count(True) == 1
         assert lost > 0  # the kills did hit runs mid-way
-        assert server.get("/api/runs", params={"status": "running"})["total"] == 0
+        assert _count(server, "running") == 0
     finally:
         server.stop()
