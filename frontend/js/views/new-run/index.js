@@ -238,8 +238,13 @@ function setMode(view, mode) {
   view.saveDraft();
 }
 
-/** Dataset, estimators, signals, axes, mode and batch datasets into the URL. */
+/**
+ * Dataset, estimators, signals, axes, mode and batch datasets into the URL; nothing once the
+ * view is left (a dataset's load can end after the user moved on, and would write this
+ * form's query onto the next page's URL).
+ */
 function syncUrl(view) {
+  if (view.ctx.signal.aborted) return;
   const { state } = view;
   const query = { dataset: state.datasetId, estimator: [...state.chosen].join(",") };
   const sig = encodeSignals(state.signals);
