@@ -52,6 +52,7 @@ from app.runs.hub import LiveHub
 from app.services.base_maps import BaseMapService
 from app.services.datasets import DatasetService
 from app.services.ecus import EcuService
+from app.services.run_exports import RunExports
 from app.services.runs import RunService
 from app.services.sweeps import SweepService
 from app.services.tokens import TokenService
@@ -97,6 +98,7 @@ def create_app(settings: Settings | None = None, *, execute_runs: bool = True) -
             executor=executor,
             datasets=DatasetService(db, open_store(settings.store_url)),
             runs=run_service,
+            exports=RunExports(db, settings),
             sweeps=SweepService(db, run_service),
             base_maps=BaseMapService(db, max_cells=settings.max_cells),
             tokens=TokenService(db),

@@ -25,6 +25,7 @@ from app.runs.hub import LiveHub
 from app.services.base_maps import BaseMapService
 from app.services.datasets import DatasetService
 from app.services.ecus import EcuService
+from app.services.run_exports import RunExports
 from app.services.runs import RunService
 from app.services.sweeps import SweepService
 from app.services.tokens import TokenService
@@ -38,6 +39,7 @@ class Services:
     executor: Executor | None
     datasets: DatasetService
     runs: RunService
+    exports: RunExports
     sweeps: SweepService
     base_maps: BaseMapService
     tokens: TokenService

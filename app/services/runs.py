@@ -1,4 +1,5 @@
-"""Runs: create, list, cancel, resume; their versions, series, cells, exports and comparisons."""
+"""Runs: create, list, cancel, resume; their versions, series, cells and comparisons (exports:
+:mod:`app.services.run_exports`)."""
 
 from __future__ import annotations
 
@@ -27,7 +28,6 @@ from app.runs.frames import StatusFrame
 from app.services import calibration_runs as cal
 from app.services.admission import GroupBudget, Limits
 from app.services.run_clone import CloneRequest, request_of
-from app.services.run_exports import Download, RunExports
 from app.services.run_plan import RunRequest, plan_run
 
 
@@ -275,20 +275,3 @@ class RunService:
             for run_id in run_ids:
                 out.append((RunRepo(s).get(run_id), VersionRepo(s).latest(run_id)))
         return out
-
-    # -- export ---------------------------------------------------------------------------------
-
-    def export(
-        self,
-        run_id: int,
-        *,
-        fmt: str,
-        version_id: int | None,
-        part: str | None,
-        number: int | None = None,
-    ) -> Download:
-        """The run (or one version: ``version_id`` the database id, or ``number`` its place
-        1…n in the run; neither: the final or latest) as a file. Map files are named
-        ``run<R>-<estimator>-v<N>`` and a DCM header says "run R …, version N"."""
-        exports = RunExports(self.db, self.settings)
-        return exports.export(run_id, fmt=fmt, version_id=version_id, part=part, number=number)

@@ -256,7 +256,7 @@ def export_run(
             "map only",
             field="part",
         )
-    download = services.runs.export(
+    download = services.exports.export(
         run_id, fmt=format, version_id=version, part=part, number=number
     )
     return Response(
