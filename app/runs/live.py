@@ -79,7 +79,6 @@ class LiveTicks:
         now = self.clock()
         if not force and (now < self.next_tick or snap.sample <= self.sample):
             return
-        self.next_tick = now + 1.0 / self.live_fps  # never more than live_fps a second
         a, z = self.sample, snap.sample
         self.sample = z
         self.seq += 1
@@ -118,6 +117,9 @@ class LiveTicks:
             values, visits = nested_or_none(table.values), nested_or_none(results.visits)
             if snap.variance is not None:
                 variances = nested_or_none(np.asarray(snap.variance).reshape(table.shape))
+        # The limit counts from the emission, not from the call: a tick slow to build must not
+        # leave the next one less than 1/live_fps behind it (never more than live_fps a second).
+        self.next_tick = self.clock() + 1.0 / self.live_fps
         message = TickMessage(
             run_id=self.run_id,
             seq=self.seq,

@@ -149,6 +149,11 @@ def test_import_a_base_map_needs_a_matching_map(page: Page, api) -> None:
     # Chosen again, its grid comes back and the map's values go with base_map_id.
     page.select_option("#base-map", "")
     page.select_option("#base-map", str(base["id"]))
+    # The map's grid is fetched and filled in: only then does the form match it (a click
+    # before that is refused with the mismatch message, as above).
+    expect(page.locator("#axis-0-bp")).to_have_value(
+        ", ".join(f"{v:g}" for v in base["axes"][0]["breakpoints"])
+    )
     with page.expect_request(lambda r: r.method == "POST" and r.url.endswith("/api/runs")) as req:
         page.locator("[data-start]").click()
     body = req.value.post_data_json
