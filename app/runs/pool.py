@@ -14,6 +14,7 @@ memory limit of :mod:`app.runs.limits`. A worker names itself (``/proc/<pid>/com
 from __future__ import annotations
 
 import contextlib
+import io
 import logging
 import os
 import queue as queue_module
@@ -81,7 +82,22 @@ def warm_up() -> int:
     config = {"axes": [{"name": "u", "breakpoints": [0.0, 1.0]}], "output": "y"}
     for name in names(EstimatorKind.MAP_FILTER):
         get_spec(name).build(config).fit(signals)
+    _touch_arrow_memory_pool()
     return os.getpid()
+
+
+def _touch_arrow_memory_pool() -> None:
+    """Write and read a tiny Parquet table, as a run reads its dataset. pyarrow's allocator
+    reserves about 1 GB of address space (``VmData``) on first use: reserved here, before
+    the worker's baseline, it neither counts against a run's ``RLIMIT_DATA`` budget nor makes
+    every worker retire after its first run as if it had kept that much memory."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    sink = io.BytesIO()
+    pq.write_table(pa.table({"u": np.arange(8.0)}), sink)
+    sink.seek(0)
+    pq.read_table(sink)
 
 
 def worker_main(context: WorkerContext, queue: Any, conn: Connection) -> None:
