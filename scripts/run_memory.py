@@ -27,11 +27,13 @@ from pathlib import Path
 
 import numpy as np
 
+from app.config import Settings
 from app.db.engine import Database
 from app.db.migrate import upgrade
-from app.db.repositories import DatasetRepo, RunRepo
+from app.db.repositories import DatasetRepo
 from app.domain import Channel
-from app.services.run_plan import RunRequest, plan_run
+from app.services.run_plan import RunRequest
+from app.services.runs import RunService
 from app.store import open_store, save_staged, stage_signals
 from estimation.signals import Signals
 from estimation.table import Axis, Table
@@ -125,23 +127,10 @@ def _add_dataset(db: Database, store_url: str, signals: Signals, name: str) -> i
 
 
 def _add_run(db: Database, dataset_id: int) -> int:
-    """An ``skf`` run on the dataset, planned as ``POST /api/runs`` plans it."""
+    """An ``skf`` run on the dataset, planned and stored as ``POST /api/runs`` does it."""
+    service = RunService(db, Settings(database_url=db.url), executor=None)
     with db.write() as s:
-        dataset = DatasetRepo(s).get(dataset_id)
-        plan = plan_run(RunRequest(**run_body(dataset_id)), dataset, None, version_fraction=0.1)
-        run = RunRepo(s).add(
-            dataset_id=dataset_id,
-            name=plan.name,
-            estimator=plan.estimator,
-            signals=plan.signals,
-            table_spec=plan.table_spec,
-            config=plan.config,
-            estimator_config=plan.estimator_config,
-            produces_map=plan.produces_map,
-            n_samples=plan.n_samples,
-            base_map_id=None,
-        )
-        return run.id
+        return service.store_in(s, RunRequest(**run_body(dataset_id))).id
 
 
 def workbench(directory: Path, rows: int, channels: int) -> Workbench:
