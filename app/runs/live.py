@@ -50,7 +50,7 @@ class LiveTicks:
 
     def start(self, snap: Snapshot, results: RunResults) -> None:
         table = snap.table
-        lines = results.lines()
+        lines = results.lines(0, 0)  # names, units and roles only
         self.publish(
             StartMessage(
                 run_id=self.run_id,
@@ -89,14 +89,14 @@ class LiveTicks:
         trajectory: dict[str, Any] = {"time": [], "points": []}
         active = None
         if table is not None and all(ax.name in signals for ax in table.axes):
-            points = signals.stack([ax.name for ax in table.axes])[index]
+            points = np.column_stack([signals[ax.name][index] for ax in table.axes])
             trajectory = {"time": finite_or_none(time_s), "points": points.tolist()}
             active = results.active_cell(z)
         # The series keep each bucket's extremes (a one-sample spike shows while the run
         # goes); the trail needs no more than evenly spread points.
-        lines = results.lines()
+        lines = results.lines(a, z)
         series_time, series_values = minmax_decimate(
-            signals.time[a:z], {x.name: x.values[a:z] for x in lines}, LIVE_POINTS_PER_TICK
+            signals.time[a:z], {x.name: x.values for x in lines}, LIVE_POINTS_PER_TICK
         )
         series = {
             x.name: {

@@ -96,6 +96,8 @@ class RunResults:
         self.sq_n = 0
         self._gate_masks = None if gates is None else gates.first_gate()
         self._first_gate_cache: tuple[int, np.ndarray] | None = None
+        self._rejections_seen = False  # a processed sample had status > 0
+        self._ise_before = (0, 0.0)  # (k, running ISE of samples [0, k)) of the last slice
 
     # -- accumulation -------------------------------------------------------------------------
 
@@ -106,6 +108,7 @@ class RunResults:
             self.status[a:z] = snap.status
         else:
             self.status[a:z] = STATUS_ACCEPTED
+        self._rejections_seen |= bool(np.any(self.status[a:z] > 0))
         for name, values in snap.outputs.items():
             values = np.asarray(values, dtype=np.float64)
             if values.ndim == 1 and values.size == z - a:
@@ -130,6 +133,7 @@ class RunResults:
             start = stop
         if start != point.step:
             raise RuntimeError(f"persisted segments cover {start} samples, version {point.step}")
+        self._rejections_seen = bool(np.any(self.status[:start] > 0))
         self.visits = point.visits
         self.cell_rejections = dict(point.cell_rejections)
         residual = self.outputs.get("residual")
@@ -233,57 +237,84 @@ class RunResults:
 
     # -- series -------------------------------------------------------------------------------
 
-    def lines(self) -> list[Series]:
-        """Every result line at full rate, keyed uniquely (see the module docstring)."""
+    def lines(self, start: int = 0, stop: int | None = None) -> list[Series]:
+        """Every result line at full rate, keyed uniquely (see the module docstring), over
+        samples ``[start, stop)`` (default the whole log): a live tick takes only its own
+        samples, so its cost does not grow with the log."""
+        a, z = start, self.n if stop is None else stop
         raw: list[tuple[str, SeriesRole, str, np.ndarray]] = []
         units = self.signals.units
         for channel in self._operating_channels():
-            raw.append((channel, SeriesRole.INPUT, units.get(channel, ""), self.signals[channel]))
+            values = self.signals[channel][a:z]
+            raw.append((channel, SeriesRole.INPUT, units.get(channel, ""), values))
         config = self.run.estimator_config
         output, out_unit = config.get("output"), config.get("output_unit", "")
         if isinstance(output, str) and output in self.signals:
             unit = units.get(output, "")
-            raw.append(("measured", SeriesRole.MEASURED, unit, self.signals[output]))
+            raw.append(("measured", SeriesRole.MEASURED, unit, self.signals[output][a:z]))
         for name, values in self.outputs.items():
-            raw.append((name, SeriesRole.OUTPUT, self._unit(name, out_unit), values))
+            raw.append((name, SeriesRole.OUTPUT, self._unit(name, out_unit), values[a:z]))
         if self.truth is not None:
             for name, truth in self.truth.scored_series.items():
                 if name in self.outputs:
                     unit = self._unit(name, out_unit)
-                    raw.append((f"{name}_true", SeriesRole.TRUTH, unit, truth))
-                    error = truth - self.outputs[name]
+                    raw.append((f"{name}_true", SeriesRole.TRUTH, unit, truth[a:z]))
+                    error = truth[a:z] - self.outputs[name][a:z]
                     raw.append((f"{name}_error", SeriesRole.ERROR, unit, error))
                     if name == "torque_nm":  # the run view's running ISE (TQ (60))
-                        t = self.signals.time
-                        ise = running_ise(t, error, window_s=torque_window(t))
+                        ise = self._running_ise(truth, self.outputs[name], a, z)
                         raw.append((f"{name}_ise", SeriesRole.ERROR, "N²·m²·s", ise))
         # With gates from the start (a stable set of lines); else once a sample is rejected.
-        rejected = self.rejection_mask()
-        if self.gates is not None or np.nansum(rejected) > 0:
+        rejected = self.rejection_mask(a, z)
+        if self.gates is not None or self._rejections_seen:
             raw.append(("rejected", SeriesRole.REJECTED, "", rejected))
         out: list[Series] = []
         taken: set[str] = set()
+        time_s = self.signals.time[a:z]
         for name, role, unit, values in raw:
             key = name if name not in taken else f"{role}:{name}"
             taken.add(key)
-            out.append(Series(key, unit, self.signals.time, values, role))
+            out.append(Series(key, unit, time_s, values, role))
         return out
 
-    def rejection_mask(self) -> np.ndarray:
-        """``(n,)`` 1.0 where sample k was rejected (status code > 0: the accept mask, the
-        innovation gate, the sensor delay; or a sample gate, also for an estimator that does
-        not take the accept mask), 0.0 where accepted, NaN where not yet processed.
+    def _running_ise(self, truth: np.ndarray, estimate: np.ndarray, a: int, z: int) -> np.ndarray:
+        """:func:`running_ise` of ``truth − estimate`` on samples ``[a, z)``, equal to the
+        whole log's. Computed on ``[a − 1, z]`` (sample k's rectangle spans to sample k + 1,
+        the last sample's repeats the step before it) less sample a − 1's own term, plus the
+        ISE before ``a``: kept from the previous call when it ended at ``a`` (live ticks come
+        in order), else summed afresh."""
+        t = self.signals.time
+        window = torque_window(t)
+        lo, end = max(a - 1, 0), min(z + 1, self.n)
+        part = running_ise(t[lo:end], truth[lo:end] - estimate[lo:end], window_s=window)
+        if a == 0:
+            ise = part[:z]
+        else:
+            if self._ise_before[0] == a:
+                offset = self._ise_before[1]
+            else:
+                head = running_ise(t[: a + 1], truth[: a + 1] - estimate[: a + 1], window_s=window)
+                offset = float(head[a - 1])
+            ise = offset + (part[1 : 1 + z - a] - part[0])
+        if z > a:
+            self._ise_before = (z, float(ise[-1]))
+        return ise
+
+    def rejection_mask(self, start: int = 0, stop: int | None = None) -> np.ndarray:
+        """``(stop − start,)`` 1.0 where sample k was rejected (status code > 0: the accept
+        mask, the innovation gate, the sensor delay; or a sample gate, also for an estimator
+        that does not take the accept mask), 0.0 where accepted, NaN where not yet processed.
 
         Its sum over the processed samples is the run's number of rejected samples; for an
         estimator that counts the mask that is ``Σ`` of its reasons in :meth:`run_rejected`
         (``gate:*`` split ``mask``). Min/max decimation keeps a 1 in every bucket that has one.
         """
-        # Built in place: one float array and one boolean temporary, whatever the log's length
-        # (called for every live frame).
-        mask = (self.status > 0).astype(np.float64)
+        a, z = start, self.n if stop is None else stop
+        status = self.status[a:z]
+        mask = (status > 0).astype(np.float64)
         if self.gates is not None:
-            mask[~self.gates.accept] = 1.0
-        mask[self.status < 0] = np.nan
+            mask[~self.gates.accept[a:z]] = 1.0
+        mask[status < 0] = np.nan
         return mask
 
     def series(self, points: int) -> list[Series]:

@@ -31,8 +31,9 @@ class FakeResults:
         self.visits = np.zeros((N, N))
         self.residual = np.sin(t)
 
-    def lines(self) -> list[Series]:
-        return [Series("residual", "", self.signals.time, self.residual, SeriesRole.OUTPUT)]
+    def lines(self, start: int = 0, stop: int | None = None) -> list[Series]:
+        time, residual = self.signals.time[start:stop], self.residual[start:stop]
+        return [Series("residual", "", time, residual, SeriesRole.OUTPUT)]
 
     def live_rmse(self) -> float | None:
         return 0.5
