@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from multiprocessing import connection as mp_connection
 from multiprocessing.connection import Connection
 from multiprocessing.context import SpawnContext, SpawnProcess
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 
@@ -123,9 +123,9 @@ def worker_main(context: WorkerContext, queue: Any, conn: Connection) -> None:
         try:
             run_id = conn.recv()
         except (EOFError, OSError):
-            return
+            _leave(queue)
         if run_id is None:
-            return
+            _leave(queue)
         _set_name(f"mw-run-{run_id}")
         reply: tuple[str, str]
         try:
@@ -140,7 +140,18 @@ def worker_main(context: WorkerContext, queue: Any, conn: Connection) -> None:
         retire = budget is not None and data_bytes() - baseline > RETIRE_FRACTION * budget * MIB
         conn.send((*reply, retire))
         if retire:
-            return
+            _leave(queue)
+
+
+def _leave(queue: Any) -> NoReturn:
+    """End the worker now: flush the live frames still buffered for the server, then exit
+    without the interpreter's teardown, which with numba, llvmlite and pyarrow loaded takes
+    about 1 s of a server's or a test module's shutdown (0.3 s instead of 1.4 s for a pool of
+    two) and releases nothing the operating system does not."""
+    with contextlib.suppress(Exception):
+        queue.close()
+        queue.join_thread()
+    os._exit(0)
 
 
 # -- in the server ------------------------------------------------------------------------------
