@@ -10,7 +10,10 @@ are ``values[i_x, i_y]``, as in mapwise tables). :func:`read_values` takes them 
 * a CDFX file (ASAM CDF 2.0, :mod:`app.calibration.cdfx`).
 
 Axis points read from DCM or CDFX must agree with the A2L: the number of points of every
-axis, and the values of a ``FIX_AXIS``. See ``docs/calibration.md#values``.
+axis, and the values of a ``FIX_AXIS``. Whatever the format, every value must lie within
+the characteristic's limits and every STD_AXIS/COM_AXIS point within its axis' limits
+(:func:`check_limits`), else the file is refused naming the cell. See
+``docs/calibration.md#values``.
 """
 
 from __future__ import annotations
@@ -32,6 +35,12 @@ ValuesFormat = Literal["hex", "s19", "dcm", "cdfx"]
 FORMATS: tuple[str, ...] = ("hex", "s19", "dcm", "cdfx")
 # Tolerance for comparing FIX_AXIS points given in a file with the A2L's (relative).
 _AXIS_RTOL = 1e-9
+# Relative slack of the limits check: a value decoded through a conversion may miss a limit
+# on the raw grid by float round-off (the slack of app.calibration.quantize).
+_LIMIT_RTOL = 1e-12
+# Axes whose points the file gives in physical units (RES_AXIS/CURVE_AXIS: point indices;
+# FIX_AXIS: the A2L's own points, checked against it by check_against_a2l).
+_CHECKED_AXES = ("STD_AXIS", "COM_AXIS")
 
 
 @dataclass
@@ -93,7 +102,7 @@ def read_values(a2l: A2lFile, char: Characteristic, data: bytes) -> CalibrationV
 
     fmt = detect_values_format(data)
     if fmt in ("hex", "s19"):
-        return image.decode_image(a2l, char, data)
+        return check_limits(char, image.decode_image(a2l, char, data), source=fmt.upper())
     if fmt == "dcm" and char.type not in ("CURVE", "MAP"):
         raise InputError(
             f"characteristic {char.name}: DCM values are read for CURVEs and MAPs "
@@ -107,7 +116,68 @@ def read_values(a2l: A2lFile, char: Characteristic, data: bytes) -> CalibrationV
             f"(it holds {sorted(found)[:20]})",
             field="values",
         )
-    return check_against_a2l(a2l, char, found[char.name], source=fmt.upper())
+    checked = check_against_a2l(a2l, char, found[char.name], source=fmt.upper())
+    return check_limits(char, checked, source=fmt.upper())
+
+
+def check_limits(
+    char: Characteristic, values: CalibrationValues, *, source: str
+) -> CalibrationValues:
+    """``values`` if every value lies in ``[char.lower, char.upper]`` and every point of a
+    STD_AXIS or COM_AXIS in its axis' ``[lower, upper]`` (ASAM MCD-2 MC LowerLimit /
+    UpperLimit, with a relative slack of 1e-12 for conversion round-off), else an
+    InputError (field ``values``) naming the characteristic, the cell or axis point, the
+    value and the limit. A NaN is outside every limit. The limits are those a learned map
+    is clamped to on write (:mod:`app.calibration.quantize`), so a base map read from an
+    ECU is one the ECU may hold (docs/calibration.md#values)."""
+    where = f"{source} {char.name}"
+    array = np.asarray(values.values, dtype=np.float64)
+    problem = _outside(array, char.lower, char.upper)
+    if problem is not None:
+        index, value, limit = problem
+        cell = f"cell {index}" if array.ndim else "the value"
+        count = int(np.count_nonzero(_outside_mask(array, char.lower, char.upper)))
+        more = f" ({count} values outside)" if count > 1 else ""
+        raise InputError(
+            f"{where}: {cell} is {value!r}, {limit} [{char.lower:g}, {char.upper:g}]{more}",
+            field="values",
+        )
+    for i, (axis, points) in enumerate(zip(char.axes, values.axes, strict=False)):
+        if axis.attribute not in _CHECKED_AXES:
+            continue
+        found = _outside(np.asarray(points, dtype=np.float64), axis.lower, axis.upper)
+        if found is not None:
+            index, value, limit = found
+            raise InputError(
+                f"{where}: axis {'XYZ'[i]} ({axis.input_quantity}) point {index[0]} is "
+                f"{value!r}, {limit} the axis [{axis.lower:g}, {axis.upper:g}]",
+                field="values",
+            )
+    return values
+
+
+def _outside_mask(array: np.ndarray, lower: float, upper: float) -> np.ndarray:
+    slack = _LIMIT_RTOL * max(abs(lower), abs(upper), 1.0)
+    return ~((array >= lower - slack) & (array <= upper + slack))  # NaN: outside
+
+
+def _outside(
+    array: np.ndarray, lower: float, upper: float
+) -> tuple[tuple[int, ...], float, str] | None:
+    """The first element outside ``[lower, upper]``: its index, value and which limit."""
+    bad = _outside_mask(array, lower, upper)
+    if not np.any(bad):
+        return None
+    index = tuple(int(i) for i in np.argwhere(bad)[0])
+    value = float(array[index])
+    limit = (
+        "not a number, outside the limits"
+        if np.isnan(value)
+        else "below the lower limit of"
+        if value < lower
+        else "above the upper limit of"
+    )
+    return index, value, limit
 
 
 def read_dcm_values(data: bytes | str) -> dict[str, CalibrationValues]:

@@ -12,11 +12,16 @@ pyarrow's number syntax is a subset of mapwise's (:data:`app.io.csv_sniff.NUMBER
 digits, sign, point, exponent; no ``1_000``, no other digits) and both round correctly, so a
 value pyarrow accepts is the value Python reads. Whenever pyarrow refuses a block (a cell it
 cannot read, a row with the wrong field count) or the block holds something that mapwise
-refuses although pyarrow read it (an empty cell where none is allowed, ``nan``, ``inf``),
-that one block is read again by the Python rules (:func:`app.io.csv_body.parse_body`),
-which either give its values (a cell only Python accepts, such as a decimal point in a
-decimal-comma file) or the error naming the file line and column. Line numbers are worked
-out only then: the fast path never splits the text into Python lines.
+refuses although pyarrow read it (an empty cell where none is allowed, ``nan``, ``inf`` in
+a column that is not sparse), that one block is read again by the Python rules
+(:func:`app.io.csv_body.parse_body`), which either give its values (a cell only Python
+accepts, such as a decimal point in a decimal-comma file) or the error naming the file line
+and column. Line numbers are worked out only then: the fast path never splits the text into
+Python lines.
+
+In a sparse column (``allowed_empty``: the upload path) a written ``nan``/``inf``/``-inf``
+is a masked sample: NaN in the column, its row listed in :attr:`Body.masked`, read on the
+fast path as by the Python rules (docs/data-formats.md#multi-rate).
 """
 
 from __future__ import annotations
@@ -24,7 +29,7 @@ from __future__ import annotations
 import bisect
 import re
 from collections.abc import Callable, Mapping, Set
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pyarrow as pa
@@ -39,16 +44,20 @@ ARROW_BLOCK_BYTES = 1 << 20  # pyarrow's own block: the unit its threads parse i
 # `content_lines` leaves out. `\s` of a str pattern is str.isspace(), as in str.strip().
 _SKIP_LINE = re.compile(r"^[^\S\n]*(?:#[^\n]*)?(?:\n|\Z)", re.MULTILINE)
 _LF = {str: "\n", bytes: b"\n"}
+_PAREN = {str: "(", bytes: b"("}
 
 
 @dataclass(frozen=True, slots=True)
 class Body:
     """The body's columns (``None``: a non-strict column that is not numeric throughout),
-    its row count and the file line of a row (``line_of(k)``, 1-based, for messages)."""
+    its row count, the file line of a row (``line_of(k)``, 1-based, for messages) and, per
+    sparse column that has any, the rows of its masked samples (a written non-finite
+    value: NaN in ``values`` like an empty cell, but a sample)."""
 
     values: dict[str, np.ndarray | None]
     rows: int
     line_of: Callable[[int], int]
+    masked: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 def read_body(
@@ -67,6 +76,7 @@ def read_body(
     active = dict(must)  # the columns still read: a non-strict one leaves when found textual
     columns: dict[str, _Column | None] = {name: _Column() for name in must}
     blocks: list[tuple[int, int, int]] = []  # text start, text end, first row
+    masked_rows: dict[str, list[np.ndarray]] = {}  # per block, rows counted from the start
     rows = 0
     pos = start
     while pos < len(text):
@@ -78,9 +88,14 @@ def read_body(
             numbered = content_lines(_str(block), _line_number(text, pos))
             body = [ln for _, ln in numbered]
             lines = [n for n, _ in numbered]
-            parsed = parse_body(body, lines, delimiter, names, active, decimal, allowed_empty)
-            got = {name: None if v is None else [v] for name, v in parsed.items()}, len(lines)
-        values, count = got
+            parsed, masked = parse_body(
+                body, lines, delimiter, names, active, decimal, allowed_empty
+            )
+            values = {name: None if v is None else [v] for name, v in parsed.items()}
+            got = values, masked, len(lines)
+        values, masked, count = got
+        for name, where in masked.items():
+            masked_rows.setdefault(name, []).append(where + rows)
         # rows still to come, from this block's rows per character: one allocation per column
         expected = int(count / max(len(block), 1) * (len(text) - end) * 1.02) + 64
         for name, chunks in values.items():
@@ -94,7 +109,8 @@ def read_body(
         rows += count
         pos = end
     out = {name: None if c is None else c.finish() for name, c in columns.items()}
-    return Body(out, rows, _line_finder(text, blocks))
+    masked_out = {n: np.concatenate(masked_rows[n]) for n in must if n in masked_rows}
+    return Body(out, rows, _line_finder(text, blocks), masked_out)
 
 
 class _Column:
@@ -125,9 +141,10 @@ def _arrow_block(
     active: Mapping[str, bool],
     decimal: str,
     allowed_empty: Set[str],
-) -> tuple[dict[str, list[np.ndarray] | None], int] | None:
-    """The block's columns (as chunks) and rows read by pyarrow, or ``None`` when the Python
-    rules must read it (an error somewhere in it, or no column to read)."""
+) -> tuple[dict[str, list[np.ndarray] | None], dict[str, np.ndarray], int] | None:
+    """The block's columns (as chunks), the rows of the masked samples of its sparse
+    columns and its row count, read by pyarrow; or ``None`` when the Python rules must read
+    it (an error somewhere in it, or no column to read)."""
     if not active:
         return None
     if isinstance(block, bytes):  # pure ASCII, handed to pyarrow as is
@@ -161,33 +178,57 @@ def _arrow_block(
     except pa.ArrowException:  # a bad cell or row (ArrowInvalid), or anything else: Python
         return None
     values: dict[str, list[np.ndarray] | None] = {}
+    masked: dict[str, np.ndarray] = {}
     for name in wanted:
         column = table.column(field[name])
-        if column.null_count and name not in allowed_empty:
+        sparse = name in allowed_empty
+        if column.null_count and not sparse:
             return None
-        chunks = [_floats(chunk) for chunk in column.chunks]
-        if any(c is None for c in chunks):
-            return None  # nan or inf written out: refused, the Python rules name the line
+        chunks: list[np.ndarray] = []
+        where: list[np.ndarray] = []
+        first = 0
+        for chunk in column.chunks:
+            got = _floats(chunk, sparse=sparse)
+            if got is None:
+                return None  # nan or inf written out: refused, the Python rules name the line
+            chunks.append(got[0])
+            if got[1].size:
+                where.append(got[1] + first)
+            first += len(chunk)
         values[name] = chunks  # type: ignore[assignment]
-    return values, table.num_rows
+        if where:
+            masked[name] = np.concatenate(where)
+    if masked and _PAREN[type(block)] in block:  # type: ignore[operator]
+        return None  # pyarrow reads `nan(1)` as NaN, mapwise refuses it: the Python rules
+    return values, masked, table.num_rows
 
 
-def _floats(chunk: pa.Array) -> np.ndarray | None:
-    """A float64 chunk as numpy (a view of pyarrow's buffer; NaN where a cell was empty),
-    or ``None`` when it holds a written-out nan or inf. Read from the buffers directly:
-    ``Array.to_numpy`` would import pandas (45 MB) into the process."""
+_NO_ROWS = np.empty(0, dtype=np.int64)
+
+
+def _floats(chunk: pa.Array, *, sparse: bool) -> tuple[np.ndarray, np.ndarray] | None:
+    """A float64 chunk as numpy (a view of pyarrow's buffer; NaN where a cell was empty)
+    and the rows of its written-out nan/inf, which are NaN too (masked samples) in a
+    ``sparse`` column and make the chunk ``None`` (refused) in any other. Read from the
+    buffers directly: ``Array.to_numpy`` would import pandas (45 MB) into the process."""
     validity, data = chunk.buffers()
     values = np.frombuffer(data, dtype=np.float64, count=len(chunk), offset=chunk.offset * 8)
+    # min and max propagate nan and reach ±inf: no mask allocated on the common path
+    finite = not values.size or bool(np.isfinite(values.min()) and np.isfinite(values.max()))
     if chunk.null_count:
         bits = np.unpackbits(np.frombuffer(validity, dtype=np.uint8), bitorder="little")
         valid = bits[chunk.offset : chunk.offset + len(chunk)].astype(bool)
-        if np.any(~np.isfinite(values) & valid):
+        written = _NO_ROWS if finite else np.flatnonzero(~np.isfinite(values) & valid)
+        if written.size and not sparse:
             return None
-        return np.where(valid, values, np.nan)
-    # min and max propagate nan and reach ±inf: no mask allocated on the common path
-    if values.size and not (np.isfinite(values.min()) and np.isfinite(values.max())):
+        usable = valid if finite else valid & np.isfinite(values)
+        return np.where(usable, values, np.nan), written
+    if finite:
+        return values, _NO_ROWS
+    if not sparse:
         return None
-    return values
+    bad = ~np.isfinite(values)
+    return np.where(bad, np.nan, values), np.flatnonzero(bad)
 
 
 def _str(block: str | bytes) -> str:

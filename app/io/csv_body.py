@@ -4,7 +4,10 @@ floats, every refusal naming its file line and column.
 :mod:`app.io.csv_arrow` reads the body with pyarrow and calls :func:`parse_body` only for a
 block pyarrow refused or that holds a value mapwise refuses, so the values and messages of a
 log are those of these rules alone (``tests/app/io/test_csv_equivalence.py``). A cell is a
-number by :data:`app.io.csv_sniff.NUMBER`.
+number by :data:`app.io.csv_sniff.NUMBER`. In a sparse column (``allowed_empty``, the
+upload path) an empty cell is no sample and a written ``nan``/``inf``/``-inf`` a masked
+sample, both NaN, the latter's rows returned apart; elsewhere a non-finite value is refused
+(docs/data-formats.md#multi-rate).
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ import numpy as np
 from app.io.csv_sniff import NUMBER, LogFormatError, mixed_delimiter_message, splits_into
 
 CHUNK_ROWS = 20_000
+_NO_ROWS = np.empty(0, dtype=np.int64)
 
 
 def cell_columns(
@@ -59,13 +63,16 @@ def parse_body(
     must: Mapping[str, bool],
     decimal: str,
     allowed_empty: Set[str] = frozenset(),
-) -> dict[str, np.ndarray | None]:
+) -> tuple[dict[str, np.ndarray | None], dict[str, np.ndarray]]:
     """The Python rules for a block of the body (:mod:`app.io.csv_arrow` calls this only for
     a block pyarrow refused or that holds a refused value): floats of the columns in
     ``must`` (name → strict), converted :data:`CHUNK_ROWS` rows at a time so that the cells
     held as Python strings stay a small part of the block; a non-strict column that is not
-    numeric throughout is ``None``. An empty cell of a column in ``allowed_empty`` is NaN."""
+    numeric throughout is ``None``. In a column of ``allowed_empty`` an empty cell is NaN and
+    a written non-finite value is NaN too, its row (in the block) listed in the second dict
+    (masked samples)."""
     parts: dict[str, list[np.ndarray] | None] = {name: [] for name in must}
+    masked: dict[str, list[np.ndarray]] = {}
     for lo in range(0, max(len(body), 1), CHUNK_ROWS):
         chunk_lines = lines[lo : lo + CHUNK_ROWS]
         cells = cell_columns(body[lo : lo + CHUNK_ROWS], chunk_lines, delimiter, len(names))
@@ -73,7 +80,7 @@ def parse_body(
             kept = parts.get(name)
             if kept is None:
                 continue
-            values = _parse_column(
+            parsed = _parse_column(
                 cells[j],
                 chunk_lines,
                 name,
@@ -81,11 +88,14 @@ def parse_body(
                 decimal=decimal,
                 empty_is_missing=name in allowed_empty,
             )
-            if values is None:
+            if parsed is None:
                 parts[name] = None
             else:
-                kept.append(values)
-    return {name: None if kept is None else np.concatenate(kept) for name, kept in parts.items()}
+                kept.append(parsed[0])
+                if parsed[1].size:
+                    masked.setdefault(name, []).append(parsed[1] + lo)
+    values = {name: None if kept is None else np.concatenate(kept) for name, kept in parts.items()}
+    return values, {name: np.concatenate(rows) for name, rows in masked.items()}
 
 
 def _parse_column(
@@ -96,9 +106,11 @@ def _parse_column(
     strict: bool,
     decimal: str = ".",
     empty_is_missing: bool = False,
-) -> np.ndarray | None:
-    """Floats of one column; ``None`` for a non-numeric column when not ``strict``; with
-    ``empty_is_missing`` an empty cell is NaN (no sample), an explicit NaN still refused.
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """Floats of one column and the rows of its masked samples; ``None`` for a non-numeric
+    column when not ``strict``. With ``empty_is_missing`` (a sparse column) an empty cell is
+    NaN (no sample) and a written ``nan``/``inf``/``-inf`` is NaN with its row listed (a
+    masked sample); otherwise a non-finite value is refused, naming its line.
 
     The whole column is converted at once; only when that fails is it walked cell by cell
     to name the first bad line.
@@ -138,15 +150,18 @@ def _parse_column(
     bad = ~np.isfinite(out)
     if empty is not None:
         bad &= ~empty
-    if np.any(bad):
-        k = int(np.argmax(bad))
-        raise LogFormatError(
-            f"line {lines[k]}, column {name!r}: {cells[k].strip()} is not allowed "
-            "(values must be finite)",
-            field=name,
-            line=lines[k],
-        )
-    return out
+    if not np.any(bad):
+        return out, _NO_ROWS
+    if empty_is_missing:
+        out[bad] = np.nan
+        return out, np.flatnonzero(bad)
+    k = int(np.argmax(bad))
+    raise LogFormatError(
+        f"line {lines[k]}, column {name!r}: {cells[k].strip()} is not allowed "
+        "(values must be finite)",
+        field=name,
+        line=lines[k],
+    )
 
 
 def _empty_cells(texts: list[str]) -> np.ndarray | None:

@@ -14,8 +14,11 @@ that).
 
 ``mapwise adapt`` reads only the columns it needs (:func:`read_csv` with ``columns``); the
 upload path (:mod:`app.io.ingest`) calls :func:`parse_sparse_csv`: every column must be
-numeric, and an empty cell is no sample of that channel (a sparse multi-rate export,
-`docs/data-formats.md#multi-rate`).
+numeric, an empty cell is no sample of that channel (a sparse multi-rate export) and a
+written ``nan``/``inf``/``-inf`` a masked sample of it, counted per channel, as in MDF
+(`docs/data-formats.md#multi-rate`). ``mapwise adapt`` (:func:`read_csv`) has no raster to
+fill a masked sample from: it refuses a non-finite value in a column it reads, naming the
+line.
 """
 
 from __future__ import annotations
@@ -23,7 +26,7 @@ from __future__ import annotations
 import csv
 import re
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -42,6 +45,8 @@ from app.io.csv_sniff import (
 from estimation import Signals
 from estimation.errors import SignalError
 
+_NO_ROWS = np.empty(0, dtype=np.int64)
+
 
 @dataclass(frozen=True, slots=True)
 class CsvLog:
@@ -56,7 +61,9 @@ class CsvLog:
 @dataclass(frozen=True, slots=True)
 class SparseCsv:
     """A CSV read with empty cells allowed: time (s, or the sample index), each column NaN
-    where its cell is empty, units, the time column used and the empty cells per column."""
+    where its cell is empty or holds a written non-finite value, units, the time column
+    used, the empty cells per column and, per column that has any, the rows whose written
+    ``nan``/``inf``/``-inf`` is a masked sample (a sample, unlike an empty cell)."""
 
     time: np.ndarray
     columns: dict[str, np.ndarray]
@@ -64,6 +71,15 @@ class SparseCsv:
     time_column: str | None
     empty: dict[str, int]
     decimal: str = "."
+    masked_rows: dict[str, np.ndarray] = field(default_factory=dict)
+
+    def sampled(self, name: str) -> np.ndarray:
+        """The rows holding a sample of ``name``: a value or a masked sample."""
+        present = ~np.isnan(self.columns[name])
+        rows = self.masked_rows.get(name)
+        if rows is not None:
+            present[rows] = True
+        return present
 
 
 @dataclass(frozen=True, slots=True)
@@ -76,6 +92,7 @@ class _Table:
     decimal: str
     rows: int
     line_of: Callable[[int], int]  # the file line of a data row, for messages
+    masked: dict[str, np.ndarray]  # rows of the written non-finite values of sparse columns
 
 
 def read_csv(
@@ -153,9 +170,10 @@ def parse_sparse_csv(
     (MDA, asammdf ``to_dataframe(use_interpolation=False)``) holds each channel only on the
     rows of its own samples. Every column must be numeric (:func:`parse_csv` with
     ``strict``); an empty cell is no sample of that channel (NaN in
-    :attr:`SparseCsv.columns`), except in the time column. A row with no sample of any
-    channel is refused, naming its line, as is every explicit ``nan``/``inf``. ``bytes``
-    as in :func:`parse_csv`."""
+    :attr:`SparseCsv.columns`), except in the time column. A written ``nan``/``inf``/
+    ``-inf`` is a masked sample (NaN, its row in :attr:`SparseCsv.masked_rows`), never a
+    reason to refuse the file; in the time column it is refused. A row with no sample of
+    any channel is refused, naming its line. ``bytes`` as in :func:`parse_csv`."""
     table = _read_table(
         text,
         columns=None,
@@ -173,10 +191,22 @@ def parse_sparse_csv(
         message, line = _with_line(str(exc), table.rows, table.line_of)
         raise LogFormatError(message, field=table.time_column or "time", line=line) from None
     values = {name: v for name, v in table.values.items() if v is not None}
+    log = SparseCsv(
+        table.time,
+        values,
+        {name: table.units[name] for name in values},
+        table.time_column,
+        {
+            name: int(np.count_nonzero(np.isnan(v))) - table.masked.get(name, _NO_ROWS).size
+            for name, v in values.items()
+        },
+        table.decimal,
+        {name: rows for name, rows in table.masked.items() if name in values},
+    )
     if values and table.time.size:
         sampled = np.zeros(table.time.size, dtype=bool)
-        for v in values.values():
-            sampled |= np.isfinite(v)
+        for name in values:
+            sampled |= log.sampled(name)
         if not np.all(sampled):
             k = int(np.argmin(sampled))
             first, line = next(iter(values)), table.line_of(k)
@@ -186,14 +216,7 @@ def parse_sparse_csv(
                 field=first,
                 line=line,
             )
-    return SparseCsv(
-        table.time,
-        values,
-        {name: table.units[name] for name in values},
-        table.time_column,
-        {name: int(np.count_nonzero(np.isnan(v))) for name, v in values.items()},
-        table.decimal,
-    )
+    return log
 
 
 def _read_table(
@@ -298,7 +321,9 @@ def _read_table(
     values = body.values
     stamps = values.pop(time_column) if time_column is not None else None
     time = stamps if stamps is not None else np.arange(body.rows, dtype=np.float64)
-    return _Table(time, values, unit_of, time_column, delimiter, decimal, body.rows, body.line_of)
+    return _Table(
+        time, values, unit_of, time_column, delimiter, decimal, body.rows, body.line_of, body.masked
+    )
 
 
 def _with_line(message: str, rows: int, line_of: Callable[[int], int]) -> tuple[str, int | None]:

@@ -3,9 +3,10 @@
 Parsing a production A2L takes seconds (:func:`app.calibration.a2l.open_a2l` writes its
 result to a cache directory keyed by the file's SHA-256), so every request that needs the
 A2L of an ECU goes through :func:`open_cached`: a hit in memory answers at once, a hit on
-disk in well under a second, a miss parses once. The disk cache is bounded: after each
-parse the oldest entries go until at most ``max_files`` files and ``max_bytes`` bytes
-remain (``MAPWISE_CACHE_FILES``, ``MAPWISE_CACHE_MB``; docs/calibration.md#rest-and-cli).
+disk in well under a second, a miss parses once; a hit never waits for a parse in progress.
+The disk cache is bounded: after each parse the oldest entries go until at most
+``max_files`` files and ``max_bytes`` bytes remain (``MAPWISE_CACHE_FILES``,
+``MAPWISE_CACHE_MB``; docs/calibration.md#rest-and-cli).
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ MEMORY_ENTRIES = 4  # parsed A2L objects kept per process (a 2 MB A2L holds a fe
 
 _memory: OrderedDict[str, A2lFile] = OrderedDict()
 _memory_lock = threading.Lock()
-_parse_lock = threading.Lock()  # one parse at a time: two requests for one A2L parse it once
+_parse_lock = threading.Lock()  # one parse at a time; hits never take it (open_cached)
 
 
 @dataclass(frozen=True, slots=True)
@@ -44,25 +45,32 @@ def sha256_of(data: bytes) -> str:
 
 
 def open_cached(sha256: str, load: Callable[[], bytes], limits: CacheLimits) -> A2lFile:
-    """The parsed A2L whose content hash is ``sha256``; ``load`` gives its bytes on a miss."""
+    """The parsed A2L whose content hash is ``sha256``; ``load`` gives its bytes on a miss.
+
+    A hit in memory or on disk never waits: only a parse takes ``_parse_lock`` (parses run
+    one at a time, each a child process holding the whole file), so reopening a cached A2L
+    does not queue behind another A2L's 10–40 s parse. Under the lock the disk is checked
+    again, so two requests for one new A2L parse it once."""
     hit = _remember(sha256)
     if hit is not None:
         return hit
-    with _parse_lock:
-        hit = _remember(sha256)
-        if hit is not None:
-            return hit
-        from app.calibration.a2l import open_a2l
+    hit = _from_disk(sha256, limits)
+    if hit is None:
+        with _parse_lock:
+            hit = _from_disk(sha256, limits)  # parsed while this request waited
+            if hit is None:
+                from app.calibration.a2l import open_a2l
 
-        limits.directory.mkdir(parents=True, exist_ok=True)
-        a2l = open_a2l(load(), cache_dir=limits.directory)
-        _touch(limits.directory, sha256)
-        prune(limits, keep=sha256)
+                limits.directory.mkdir(parents=True, exist_ok=True)
+                hit = open_a2l(load(), cache_dir=limits.directory)
+                prune(limits, keep=sha256)
+    _touch(limits.directory, sha256)
     with _memory_lock:
-        _memory[sha256] = a2l
+        _memory[sha256] = hit
+        _memory.move_to_end(sha256)
         while len(_memory) > MEMORY_ENTRIES:
             _memory.popitem(last=False)
-    return a2l
+    return hit
 
 
 def open_bytes(data: bytes, limits: CacheLimits) -> A2lFile:
@@ -76,6 +84,13 @@ def _remember(sha256: str) -> A2lFile | None:
         if a2l is not None:
             _memory.move_to_end(sha256)
         return a2l
+
+
+def _from_disk(sha256: str, limits: CacheLimits) -> A2lFile | None:
+    """The A2L from the disk cache, ``None`` when it is not there (no parse, no lock)."""
+    from app.calibration.a2l import open_cached as open_from_disk
+
+    return open_from_disk(sha256, cache_dir=limits.directory)
 
 
 def _entries(directory: Path) -> list[Path]:

@@ -4,8 +4,11 @@ run's table or a base map (docs/calibration.md#rest-and-cli).
 An upload is checked whole before anything is stored: the A2L must parse (422 naming
 ``a2l``), the values file must be a HEX, S19, DCM or CDFX (422 naming ``values``); the
 names a DCM or CDFX holds that the A2L does not know are reported as notes, not errors.
-Values are decoded per map, on demand: a HEX that does not cover the map, a DCM whose axis
-points disagree with the A2L or values beyond the limits are a 422 naming the map then.
+Values are decoded per map, when the map is used (its values, its New-run template, a base
+map of it): a HEX that does not cover the map, a DCM whose axis points disagree with the A2L
+or values beyond the A2L limits (:func:`app.calibration.values.check_limits`) are a 422
+naming the map, the cell and the limit then, and nothing is stored. One map out of its
+limits does not refuse the ECU's other maps (docs/calibration.md#rest-and-cli).
 """
 
 from __future__ import annotations

@@ -1,12 +1,15 @@
 """The pure-Python CSV reader of mapwise before pyarrow (``app/io/csv_files.py`` at commit
-4cfd555), kept unchanged as the slow reference: tests check that
+4cfd555), kept as the slow reference: tests check that
 :mod:`app.io.csv_files` gives the same values and messages, and ``scripts/bench_ingest.py``
 times it. Not used by the application.
 
-Its rules, as they were: one header row (delimiter sniffed among ``, ; tab``); units either
-in the header as ``name [unit]`` or in an optional second row whose non-empty cells are all
-non-numeric; lines starting with ``#`` are comments. With ``;`` or tab as delimiter a decimal
-comma (``1,5``) is recognised. Every problem is reported with its file line and column name.
+One rule has changed since (issue 16): in :func:`parse_sparse_csv` (the upload path) a
+written ``nan``/``inf``/``-inf`` is a masked sample, NaN with its row in
+``SparseCsv.masked_rows``, no longer a refusal. Its rules, otherwise as they were: one
+header row (delimiter sniffed among ``, ; tab``); units either in the header as ``name
+[unit]`` or in an optional second row whose non-empty cells are all non-numeric; lines
+starting with ``#`` are comments. With ``;`` or tab as delimiter a decimal comma (``1,5``)
+is recognised. Every problem is reported with its file line and column name.
 """
 
 from __future__ import annotations
@@ -15,7 +18,7 @@ import csv
 import re
 from collections import Counter
 from collections.abc import Mapping, Sequence, Set
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -65,6 +68,7 @@ class SparseCsv:
     time_column: str | None
     empty: dict[str, int]
     decimal: str = "."
+    masked_rows: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 @dataclass(frozen=True, slots=True)
@@ -76,6 +80,7 @@ class _Table:
     delimiter: str
     decimal: str
     lines: list[int]
+    masked: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 def read_csv(
@@ -156,8 +161,9 @@ def parse_sparse_csv(
     (MDA, asammdf ``to_dataframe(use_interpolation=False)``) holds each channel only on the
     rows of its own samples. Every column must be numeric (:func:`parse_csv` with
     ``strict``); an empty cell is no sample of that channel (NaN in
-    :attr:`SparseCsv.columns`), except in the time column. A row with no sample of any
-    channel is refused, naming its line, as is every explicit ``nan``/``inf``."""
+    :attr:`SparseCsv.columns`), except in the time column. A written ``nan``/``inf`` is a
+    masked sample (NaN, its row in ``masked_rows``). A row with no sample of any channel is
+    refused, naming its line."""
     table = _read_table(
         text,
         columns=None,
@@ -177,8 +183,9 @@ def parse_sparse_csv(
     values = {name: v for name, v in table.values.items() if v is not None}
     if values and table.time.size:
         sampled = np.zeros(table.time.size, dtype=bool)
-        for v in values.values():
+        for name, v in values.items():
             sampled |= np.isfinite(v)
+            sampled[table.masked.get(name, [])] = True
         if not np.all(sampled):
             k = int(np.argmin(sampled))
             first = next(iter(values))
@@ -193,8 +200,12 @@ def parse_sparse_csv(
         values,
         {name: table.units[name] for name in values},
         table.time_column,
-        {name: int(np.count_nonzero(np.isnan(v))) for name, v in values.items()},
+        {
+            name: int(np.count_nonzero(np.isnan(v))) - len(table.masked.get(name, []))
+            for name, v in values.items()
+        },
         table.decimal,
+        {name: rows for name, rows in table.masked.items() if name in values},
     )
 
 
@@ -279,10 +290,16 @@ def _read_table(
         if name == time_column or wanted is None or name in wanted
     }
     allowed_empty = {n for n in must if n != time_column} if empty_is_missing else set()
-    values = _parse_body(body, lines_of_body, delimiter, names, must, decimal, allowed_empty)
+    masked: dict[str, list[int]] = {}
+    values = _parse_body(
+        body, lines_of_body, delimiter, names, must, decimal, allowed_empty, masked
+    )
     stamps = values.pop(time_column) if time_column is not None else None
     time = stamps if stamps is not None else np.arange(len(lines_of_body), dtype=np.float64)
-    return _Table(time, values, unit_of, time_column, delimiter, decimal, lines_of_body)
+    masked_rows = {n: np.array(rows, dtype=np.int64) for n, rows in masked.items()}
+    return _Table(
+        time, values, unit_of, time_column, delimiter, decimal, lines_of_body, masked_rows
+    )
 
 
 def split_lines(text: str) -> list[str]:
@@ -441,6 +458,7 @@ def _parse_body(
     must: Mapping[str, bool],
     decimal: str,
     allowed_empty: Set[str] = frozenset(),
+    masked: dict[str, list[int]] | None = None,
 ) -> dict[str, np.ndarray | None]:
     """Floats of the columns in ``must`` (name → strict), converted :data:`CHUNK_ROWS` rows at
     a time so that the cells held as Python strings stay a small part of the file; a
@@ -465,6 +483,10 @@ def _parse_body(
             if values is None:
                 parts[name] = None
             else:
+                if name in allowed_empty and masked is not None:  # written nan/inf: masked
+                    for k, (cell, value) in enumerate(zip(cells[j], values, strict=True)):
+                        if cell.strip() and not np.isfinite(value):
+                            masked.setdefault(name, []).append(lo + k)
                 kept.append(values)
     return {name: None if kept is None else np.concatenate(kept) for name, kept in parts.items()}
 
@@ -528,6 +550,9 @@ def _parse_column(
     bad = ~np.isfinite(out)
     if empty is not None:
         bad &= ~empty
+    if empty_is_missing:  # a written nan/inf is a masked sample (NaN), issue 16
+        out[bad] = np.nan
+        return out
     if np.any(bad):
         k = int(np.argmax(bad))
         raise LogFormatError(

@@ -342,3 +342,124 @@ def test_the_a2l_cache_keeps_within_its_bounds(tmp_path: Path) -> None:
     assert (removed, left) == (2, [".", "a", "d"])
     removed = prune(CacheLimits(tmp_path, max_files=1, max_bytes=10**6))
     assert (removed, sorted(p.name[:1] for p in tmp_path.iterdir())) == (1, [".", "d"])
+
+
+def _image_with(values: np.ndarray) -> bytes:
+    """The map's record (as :func:`ef.map_record` lays it out) holding ``values``."""
+    import struct
+
+    record = bytearray(ef.map_record())
+    start = len(record) - 2 * values.size  # the SWORD values close the record
+    record[start:] = struct.pack(f"<{values.size}h", *values.astype(int).ravel(order="F"))
+    image = bincopy.BinFile()
+    image.add_binary(bytes(record), address=ef.MAP_ADDRESS)
+    return image.as_ihex().encode()
+
+
+def test_a_map_beyond_its_limits_is_refused_when_used_and_nothing_is_stored(
+    client: TestClient, database_url: str, a2l_bytes: bytes, drive: dict
+) -> None:
+    """The upload stores the ECU (its other maps stay usable); the map's values, its New-run
+    template and a base map of it are each a 422 naming the map, the cell, the value and the
+    limit, and no row is written."""
+    from app.io.dcm import DcmBlock, blocks_to_dcm
+
+    high = VALUES.copy()
+    high[3, 4] = 32500.0  # an SWORD holds it; the demo's UPPER_LIMIT is 32267
+    axes = [(ef.X_QUANTITY, "", list(ef.X_POINTS)), (ef.Y_QUANTITY, "", list(ef.Y_POINTS))]
+    wide_axis = [(ef.X_QUANTITY, "", [-10.0, 0.0, 10.0, 130.0]), axes[1]]  # axis limit 127
+    cases = [
+        ("hex", _image_with(high), "HEX", "cell (3, 4) is 32500.0, above the upper limit of"),
+        (
+            "dcm",
+            blocks_to_dcm([DcmBlock(MAP, axes, high, ef.MAP_UNIT)]).encode(),
+            "DCM",
+            "cell (3, 4) is 32500.0, above the upper limit of [-32268, 32267]",
+        ),
+        (
+            "dcm",
+            blocks_to_dcm([DcmBlock(MAP, wide_axis, VALUES, ef.MAP_UNIT)]).encode(),
+            "DCM",
+            f"axis X ({ef.X_QUANTITY}) point 3 is 130.0, above the upper limit of the axis "
+            "[-128, 127]",
+        ),
+    ]
+    for fmt, data, source, message in cases:
+        uploaded = client.post(
+            "/api/ecus", files={"a2l": ("lim.a2l", a2l_bytes), "values": (f"v.{fmt}", data)}
+        )
+        assert uploaded.status_code == 201, uploaded.text  # refused when the map is used
+        ecu_id = uploaded.json()["id"]
+        before = _count(database_url)
+        for method, path in [
+            ("get", f"/api/ecus/{ecu_id}/maps/{MAP}"),
+            ("get", f"/api/ecus/{ecu_id}/maps/{MAP}/template?dataset_id={drive['id']}"),
+            ("post", f"/api/ecus/{ecu_id}/maps/{MAP}/base-map"),
+        ]:
+            response = getattr(client, method)(path)
+            assert response.status_code == 422, (path, response.text)
+            error = response.json()["error"]
+            assert error["field"] == "values"
+            assert error["message"].startswith(f"{source} {MAP}: "), error
+            assert message in error["message"], error
+        assert _count(database_url) == before  # no base map, nothing else
+        listed = client.get(f"/api/ecus/{ecu_id}/maps", params={"q": MAP})
+        assert listed.status_code == 200  # the ECU itself stays usable
+        assert [m["name"] for m in listed.json()["items"]] == [MAP]
+        assert client.delete(f"/api/ecus/{ecu_id}").status_code == 204
+
+
+def test_a_linked_table_that_does_not_fit_the_map_is_refused(
+    client: TestClient, database_url: str, ecu: dict, drive: dict
+) -> None:
+    """``check_table``: more points than the A2L's maxAxisPoints, or FIX_AXIS points other
+    than the A2L's, are a 422 naming the axis' breakpoints; no run is stored."""
+    curve = "ASAM.C.CURVE.STD_AXIS"  # STD_AXIS, at most 8 points
+    fixed = "ASAM.C.MAP.COM_AXIS.FIX_AXIS"  # Y: FIX_AXIS_PAR_DIST 0 1 3 → 0, 1, 2
+    base = {
+        "dataset_id": drive["id"],
+        "estimator": "skf",
+        "signals": {"y": ef.OUTPUT},
+        "config": {"sigma_v": 0.5, "sigma_w": 0.05, "p0": 100.0},
+    }
+    cases = [
+        (
+            curve,
+            [{"name": ef.Y_QUANTITY, "breakpoints": [0.5 * k for k in range(9)]}],
+            "table.axes[0].breakpoints",
+            "holds at most 8 points; the table has 9",
+        ),
+        (
+            fixed,
+            [
+                {"name": ef.X_CHANNEL, "breakpoints": [-10, -5, 0, 5, 10, 15, 20, 25]},
+                {"name": ef.Y_QUANTITY, "breakpoints": [0, 1, 3]},
+            ],
+            "table.axes[1].breakpoints",
+            "is a FIX_AXIS with points [0.0, 1.0, 2.0]",
+        ),
+    ]
+    before = _count(database_url)
+    for name, axes, field, message in cases:
+        body = {**base, "table": {"axes": axes}, "calibration": {"ecu_id": ecu["id"], "map": name}}
+        response = client.post("/api/runs", json=body)
+        assert response.status_code == 422, response.text
+        error = response.json()["error"]
+        assert (error["field"], name in error["message"]) == (field, True), error
+        assert message in error["message"], error
+    assert _count(database_url) == before
+
+
+def test_an_a2l_the_parser_refuses_is_a_422_and_nothing_is_stored(
+    client: TestClient, database_url: str, a2l_bytes: bytes
+) -> None:
+    """Past the sniff (PROJECT and MODULE are there) but cut off inside a CHARACTERISTIC:
+    pya2ldb's parser refuses it; 422 naming ``a2l``, and no row is written."""
+    cut = a2l_bytes[: a2l_bytes.index(b"/begin CHARACTERISTIC") + 40]
+    before = _count(database_url)
+    response = client.post("/api/ecus", files={"a2l": ("cut.a2l", cut)})
+    assert response.status_code == 422, response.text
+    error = response.json()["error"]
+    assert error["field"] == "a2l"
+    assert "does not parse" in error["message"], error
+    assert _count(database_url) == before

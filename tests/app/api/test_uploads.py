@@ -40,8 +40,8 @@ NUMBER_SCHEMA = {
 CORPUS = {
     "truncated": (b"time,a,b\n0,1,2\n1,2,3\n2,3", 422, "file"),
     "wrong delimiter": (b"time|a|b\n0|1|2\n1|2|3\n", 422, "file"),
-    "NaN": (b"time,a\n0,1\n1,nan\n2,3\n", 422, "a"),
-    "Inf": (b"time,a\n0,1\n1,-inf\n2,3\n", 422, "a"),
+    "only masked samples": (b"time,a\n0,nan\n1,-inf\n2,3\n", 422, "file"),  # 1 usable
+    "inf in the time column": (b"time,a\n0,1\ninf,2\n2,3\n", 422, "time"),
     "text in a numeric column": (b"time,a\n0,1\n1,abc\n2,3\n", 422, "a"),
     "duplicate timestamps": (b"time,a\n0,1\n1,2\n1,3\n", 422, "time"),
     "decreasing time": (b"time,a\n0,1\n2,2\n1,3\n", 422, "time"),
@@ -276,6 +276,8 @@ def test_bad_raster_or_channels_are_refused_and_nothing_is_stored(
 def test_sparse_csv_export_upload(client: TestClient, tmp_path) -> None:  # type: ignore[no-untyped-def]
     from tests.support.measurements import (
         NMOT,
+        POLE,
+        T10,
         T100,
         Measurement,
         write_measurement,
@@ -283,10 +285,13 @@ def test_sparse_csv_export_upload(client: TestClient, tmp_path) -> None:  # type
     )
 
     measurement: Measurement = write_measurement(tmp_path, "3.30")
-    csv_path = write_sparse_csv(tmp_path, measurement, ["fast", "mode", NMOT])
+    csv_path = write_sparse_csv(tmp_path, measurement, ["fast", "mode", NMOT, POLE])
     response = upload(client, csv_path.read_bytes(), name="export.csv")
     assert response.status_code == 201, response.text
     doc = response.json()
     assert (doc["source"], doc["time_column"], doc["rows"]) == ("csv", "timestamps", T100.size)
-    assert [c["name"] for c in doc["channels"]] == ["fast", "mode", NMOT]
+    assert [c["name"] for c in doc["channels"]] == ["fast", "mode", POLE, NMOT]
     assert any("held (previous value) ['mode']" in n for n in doc["notes"])
+    # the pole's written -inf: masked samples, counted (docs/data-formats.md#multi-rate)
+    assert doc["masked"] == {POLE: 10}
+    assert any(f"{POLE!r}: 10 of {T10.size} samples masked" in n for n in doc["notes"])

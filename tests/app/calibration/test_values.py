@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -10,6 +12,7 @@ from app.calibration.cdfx import read_cdfx, write_cdfx
 from app.calibration.image import decode_image, patch_image
 from app.calibration.values import (
     CalibrationValues,
+    check_limits,
     detect_values_format,
     learned_values,
     read_dcm_values,
@@ -18,7 +21,7 @@ from app.calibration.values import (
 )
 from app.io.dcm import map_from_dcm
 from app.io.errors import InputError
-from tests.app.calibration.encode import MAP_STD, image, known_values
+from tests.app.calibration.encode import CURVES_FNC, MAP_STD, image, known_values
 
 MAP = MAP_STD[0]
 FIX_CURVE = "ASAM.C.CURVE.FIX_AXIS.PAR_DIST"
@@ -185,3 +188,57 @@ def test_dcm_block_kinds_follow_the_axis_types(full_demo_a2l: A2lFile, hex_image
         "GRUPPENKENNLINIE ASAM.C.CURVE.COM_AXIS 8",
         f"FESTKENNLINIE {FIX_CURVE} 6",
     ]
+
+
+def test_values_beyond_the_limits_are_refused_naming_cell_value_and_limit(
+    full_demo_a2l: A2lFile, hex_image: bytes
+) -> None:
+    """Every format: a value outside [LowerLimit, UpperLimit] (-32268, 32267 for the demo's
+    SWORD maps), a NaN, or a STD_AXIS point outside its axis' limits (-128, 127) is an
+    InputError on ``values``; a value on the limit is read."""
+    char = full_demo_a2l.get(MAP)
+    current = read_values(full_demo_a2l, char, hex_image)
+    on_limit = current.values.copy()
+    on_limit[0, 0], on_limit[2, 4] = -32268.0, 32267.0
+    vals = CalibrationValues(MAP, current.axes, on_limit)
+    got = read_values(full_demo_a2l, char, write_cdfx([(char, vals)]))
+    np.testing.assert_array_equal(got.values, on_limit)
+
+    cases = [
+        (1, 2, 32268.0, r"cell \(1, 2\) is 32268\.0, above the upper limit of \[-32268, 32267\]"),
+        (0, 4, -1e6, r"cell \(0, 4\) is -1000000\.0, below the lower limit of"),
+    ]
+    for i, j, value, message in cases:
+        bad = current.values.copy()
+        bad[i, j] = value
+        vals = CalibrationValues(MAP, current.axes, bad)
+        for fmt, data in (
+            ("DCM", write_dcm([(char, vals)]).encode()),
+            ("CDFX", write_cdfx([(char, vals)])),
+        ):
+            with pytest.raises(InputError, match=rf"^{fmt} {re.escape(MAP)}: {message}") as e:
+                read_values(full_demo_a2l, char, data)
+            assert e.value.field == "values"
+
+    nan = current.values.copy()
+    nan[2, 0] = np.nan  # DCM and CDFX refuse a NaN themselves; a float image can hold one
+    with pytest.raises(InputError, match=r"^HEX .*: cell \(2, 0\) is nan, not a number"):
+        check_limits(char, CalibrationValues(MAP, current.axes, nan), source="HEX")
+
+    axes = (np.array([-100.0, 0.0, 130.0]), current.axes[1])
+    vals = CalibrationValues(MAP, axes, current.values)
+    with pytest.raises(InputError, match=r"axis X \(.*\) point 2 is 130\.0, above the upper"):
+        read_values(full_demo_a2l, char, write_dcm([(char, vals)]).encode())
+
+
+def test_an_image_value_beyond_the_limits_is_refused(full_demo_a2l: A2lFile) -> None:
+    """An SWORD can hold 32500, the demo's limit is 32267: decoded, then refused."""
+    import struct
+
+    _, records = known_values()
+    name = "ASAM.C.CURVE.FIX_AXIS.PAR_DIST"  # FNC_VALUES only: six SWORDs at its address
+    address = CURVES_FNC[name][0]
+    records[address] = struct.pack("<6h", 1, 2, 3, 32500, 5, 6)
+    char = full_demo_a2l.get(name)
+    with pytest.raises(InputError, match=rf"^HEX {re.escape(name)}: cell \(3,\) is 32500\.0"):
+        read_values(full_demo_a2l, char, image(records, "hex"))

@@ -188,3 +188,74 @@ def test_adapt_calibration_flags_exit_2(files, capsys, extra, message) -> None: 
     assert (code, out) == (2, "")
     assert message in err
     assert err.count("\n") == 1
+
+
+def _dcm(path: Path, name: str, axes: list, values: np.ndarray) -> Path:
+    from app.io.dcm import DcmBlock, blocks_to_dcm
+
+    path.write_text(blocks_to_dcm([DcmBlock(name, axes, values, ef.MAP_UNIT)]))
+    return path
+
+
+def _bad_values(case: str, folder: Path, hex_path: Path) -> tuple[str, Path, str]:
+    """``(map, values file, what the error line says)`` of each bad values file."""
+    xy = [(ef.X_QUANTITY, "", list(ef.X_POINTS)), (ef.Y_QUANTITY, "", list(ef.Y_POINTS))]
+    if case == "hex without the map":
+        name = "ASAM.C.CURVE.STD_AXIS"  # its record is not in the image
+        return name, hex_path, f"characteristic {name}"
+    if case == "dcm axis not the A2L's":
+        name = "ASAM.C.CURVE.FIX_AXIS.PAR_DIST"  # FIX_AXIS 0, 20, …, 100
+        path = _dcm(folder / "axis.dcm", name, [("x", "", [0, 20, 40, 60, 80, 120])], np.ones(6))
+        return name, path, f"DCM {name}: axis X (ASAM.M.SCALAR.SBYTE.IDENTICAL) points"
+    high = VALUES.copy()
+    high[0, 1] = -40000.0
+    path = _dcm(folder / "high.dcm", ef.MAP_NAME, xy, high)
+    return (
+        ef.MAP_NAME,
+        path,
+        (f"DCM {ef.MAP_NAME}: cell (0, 1) is -40000.0, below the lower limit of [-32268, 32267]"),
+    )
+
+
+BAD_VALUES = ["hex without the map", "dcm axis not the A2L's", "dcm beyond the limits"]
+
+
+@pytest.mark.parametrize("case", BAD_VALUES)
+def test_bad_values_files_exit_2_and_write_nothing(files, tmp_path, capsys, case) -> None:  # type: ignore[no-untyped-def]
+    """``a2l show`` and ``adapt --a2l`` refuse the values with exit 2 and one line naming the
+    characteristic and the problem; adapt writes none of its outputs."""
+    a2l, hex_path, log = files
+    name, values, message = _bad_values(case, tmp_path, hex_path)
+    code, out, err = run(["a2l", "show", str(a2l), "--map", name, "--values", str(values)], capsys)
+    assert (code, out) == (2, "")
+    assert message in err
+    assert err.count("\n") == 1
+    outputs = [tmp_path / "out.json", tmp_path / "out.dcm", tmp_path / "out.cdfx"]
+    code, out, err = run(
+        ["adapt", str(log), "--estimator", "skf", "--a2l", str(a2l), "--map", name,
+         "--values", str(values), "--y", ef.OUTPUT, "--out", str(outputs[0]),
+         "--out-dcm", str(outputs[1]), "--out-cdfx", str(outputs[2])],
+        capsys,
+    )  # fmt: skip
+    assert (code, out) == (2, "")
+    assert message in err
+    assert err.count("\n") == 1
+    assert not any(p.exists() for p in outputs)
+
+
+def test_an_a2l_the_parser_refuses_exits_2(files, tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    """Past the sniff (PROJECT and MODULE are there), cut off inside a CHARACTERISTIC:
+    pya2ldb's parser refuses it, in ``a2l list`` and in ``adapt --a2l``."""
+    a2l, _, log = files
+    text = a2l.read_bytes()
+    cut = tmp_path / "cut.a2l"
+    cut.write_bytes(text[: text.index(b"/begin CHARACTERISTIC") + 40])
+    for args in (
+        ["a2l", "list", str(cut)],
+        ["adapt", str(log), "--estimator", "skf", "--a2l", str(cut), "--map", ef.MAP_NAME,
+         "--y", ef.OUTPUT],
+    ):  # fmt: skip
+        code, out, err = run(args, capsys)
+        assert (code, out) == (2, "")
+        assert "the A2L does not parse" in err
+        assert err.count("\n") == 1

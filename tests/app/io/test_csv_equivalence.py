@@ -70,6 +70,8 @@ GOOD_TEXTS: dict[str, str] = {
     "empty cells": "time,a,b\n0,1,\n1,,2\n2,3,4\n",
     "empty cells only in a text column": "time,a,b\n0,1,\n1,2,x\n",
     "written nan": "time,a\n0,1\n1,nan\n2,3\n",
+    "written inf in the time column": "time,a\n0,1\ninf,2\n",
+    "written nan(1) beside an inf": "time,a,b\n0,1,inf\n1,nan(1),2\n2,3,4\n",
     "written inf in a text column": "time,a,b\n0,1,inf\n1,2,x\n",
     "comments and blank lines in the body": (
         "time,a\n# c\n0,1\n\n   \n  # indented\n1,2\n\t\n2,3\n#end"
@@ -136,6 +138,7 @@ def _outcome(parse: Any, text: str, **kwargs: Any) -> dict[str, Any]:
         "columns": log.columns,
         "units": log.units,
         "meta": (log.time_column, log.decimal, log.empty),
+        "masked": {name: rows.tolist() for name, rows in log.masked_rows.items()},
     }
 
 
@@ -145,6 +148,7 @@ def _same(new: dict[str, Any], old: dict[str, Any]) -> None:
         assert new["error"] == old["error"]
         return
     assert new["meta"] == old["meta"]
+    assert new.get("masked") == old.get("masked")
     assert new["units"] == old["units"]
     assert list(new["columns"]) == list(old["columns"])
     for name in ["time", *old["columns"]]:
@@ -193,6 +197,31 @@ def test_same_values_or_error_as_the_python_reader(name: str, mode: str, block_c
     new_parse, old_parse, kwargs = MODES[mode]
     text = CORPUS[name]
     _same(_outcome(new_parse, text, **kwargs), _outcome(old_parse, text, **kwargs))
+
+
+# Sparse exports with masked samples: the upload path only (``mapwise adapt`` drops a column
+# with an empty cell, and refuses a non-finite value in one it keeps).
+SPARSE_TEXTS = {
+    "written nan and inf beside empty cells": (
+        "time,a,b,c\n0,1,,inf\n0.5,,-inf,2\n1,NaN,3,\n1.5,4,Infinity,-INF\n2,5,6,7\n"
+    ),
+    "only masked samples on a row": "time,a,b\n0,1,2\n1,nan,inf\n2,3,\n",
+    "masked samples over many blocks": "time,x,y\n"
+    + "".join(f"{k},{'inf' if k % 7 == 3 else k},{'' if k % 2 else '-nan'}\n" for k in range(90)),
+}
+
+
+@pytest.mark.parametrize("mode", ["upload", "upload, bytes"])
+@pytest.mark.parametrize("name", list(SPARSE_TEXTS))
+def test_masked_samples_read_alike(name: str, mode: str, block_chars: int) -> None:
+    """A written nan/inf in a sparse column is a masked sample: NaN, its row listed, on the
+    pyarrow path as by the Python rules, whatever the block boundaries."""
+    new_parse, old_parse, kwargs = MODES[mode]
+    text = SPARSE_TEXTS[name]
+    new = _outcome(new_parse, text, **kwargs)
+    _same(new, _outcome(old_parse, text, **kwargs))
+    assert "error" not in new
+    assert new["masked"], new
 
 
 @pytest.mark.parametrize("path", FILES, ids=[p.name for p in FILES])

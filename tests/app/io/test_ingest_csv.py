@@ -81,8 +81,13 @@ BAD_FILES = [
         "rpm",
         "line 3, column 'rpm': empty",
     ),
-    ("NaN", b"time,rpm\n0,1\n1,nan\n", "validation_error", "rpm", "line 3, column 'rpm': nan"),
-    ("Inf", b"time,rpm\n0,1\n1,-inf\n", "validation_error", "rpm", "-inf is not allowed"),
+    (
+        "only masked samples",  # a written nan/inf is a masked sample: none is usable here
+        b"time,rpm\n0,nan\n1,-inf\n2,1\n",
+        "validation_error",
+        "file",
+        "no channel has usable samples",
+    ),
     ("NaN in time", b"time,rpm\n0,1\nNaN,2\n", "validation_error", "time", "line 3, column 'time'"),
     (
         "duplicate timestamps",
@@ -247,6 +252,20 @@ def test_bad_file_corpus(content: bytes, code: str, field: str, message: str) ->
     assert message in err.message
     assert err.status == {"validation_error": 422, "unsupported_format": 415}[code]
     assert "\n" not in err.message
+
+
+def test_written_nan_and_inf_are_masked_samples_counted_per_channel() -> None:
+    """A written ``nan``/``inf``/``-inf`` is a masked sample of its channel (filled from the
+    valid neighbours, counted and noted per channel), never a refusal of the file; also
+    with ``;`` and a decimal comma."""
+    text = "time,rpm,temp\n0,1000.5,80.5\n1,nan,81.5\n2,1200.5,-inf\n3,1300.5,INF\n4,1400.5,84.5\n"
+    for content in (text, text.replace(",", ";").replace(".", ",")):
+        ds = ingest(content.encode())
+        np.testing.assert_array_equal(ds.signals.time, [0, 1, 2, 3, 4])
+        np.testing.assert_allclose(ds.signals["rpm"], [1000.5, 1100.5, 1200.5, 1300.5, 1400.5])
+        np.testing.assert_allclose(ds.signals["temp"], [80.5, 81.5, 82.5, 83.5, 84.5])
+        assert ds.masked == {"rpm": 1, "temp": 2}
+        assert any("'temp': 2 of 5 samples masked" in n for n in ds.notes), ds.notes
 
 
 def test_too_large_is_refused_before_parsing() -> None:
