@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+from collections.abc import Collection
 from dataclasses import dataclass, field
 from datetime import datetime
 from enum import StrEnum
@@ -43,11 +45,14 @@ class SeriesRole(StrEnum):
 @dataclass(frozen=True, slots=True)
 class Channel:
     """A dataset's channel; ``masked``: its samples masked on upload (non-finite or flagged
-    invalid, filled from the valid neighbours, `docs/data-formats.md#multi-rate`)."""
+    invalid, filled from the valid neighbours, `docs/data-formats.md#multi-rate`);
+    ``timing``: in a dataset stored as recorded, ``(start_s, stop_s, step_s)``: its first
+    and last valid sample and its median time step."""
 
     name: str
     unit: str
     masked: int = 0
+    timing: tuple[float, float, float] | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -84,6 +89,29 @@ class Dataset:
 
     def unit_of(self, name: str) -> str:
         return next((c.unit for c in self.channels if c.name == name), "")
+
+    @property
+    def recorded(self) -> bool:
+        """Stored as recorded: its channels on their own timestamps, resampled when read."""
+        return any(c.timing is not None for c in self.channels)
+
+    def timing_of(self, name: str) -> tuple[float, float, float] | None:
+        return next((c.timing for c in self.channels if c.name == name), None)
+
+    def rows_for(self, names: Collection[str], step_s: float | None = None) -> tuple[int, float]:
+        """Rows and rate (Hz) of a read of the channels ``names``: the dataset's own, unless
+        it is stored as recorded, where the read is on the raster of step ``step_s``
+        (default: the slowest among them) over the span they all cover
+        (`docs/data-formats.md#multi-rate`): ``rows = ⌊(min stop − max start) / step⌋ + 1``,
+        exact for a uniform raster."""
+        timings = [c.timing for c in self.channels if c.name in names and c.timing is not None]
+        if not timings:
+            return self.rows, self.rate_hz
+        step = step_s if step_s is not None else max(t[2] for t in timings)
+        span = min(t[1] for t in timings) - max(t[0] for t in timings)
+        if not (step > 0 and span > 0):
+            return self.rows, self.rate_hz
+        return math.floor(span / step * (1 + 1e-12)) + 1, 1.0 / step
 
     def has_channel(self, name: str) -> bool:
         return any(c.name == name for c in self.channels)

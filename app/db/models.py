@@ -52,8 +52,9 @@ class DatasetRow(Base):
 
     ``payload``: the npz samples of a row from before revision 0008 (``NULL`` since: the
     migration moves them to the store). ``channels``: ``[{"name", "unit"}]``, plus
-    ``"masked": n`` on a channel with ``n > 0`` masked samples; ``notes``: what ingest said
-    about the upload (``NULL``: nothing).
+    ``"masked": n`` on a channel with ``n > 0`` masked samples and, in a dataset stored as
+    recorded, ``"timing": [start_s, stop_s, step_s]``; ``notes``: what ingest said about the
+    upload (``NULL``: nothing).
     """
 
     __tablename__ = "datasets"

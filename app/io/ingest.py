@@ -24,15 +24,26 @@ import os
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import BinaryIO
+from typing import TYPE_CHECKING, BinaryIO
 
 import numpy as np
 
 from app.io.errors import InputError, too_large, unsupported
 from app.io.names import bad_character, check_name
-from app.io.resample import Raster, Track, held_by_values, parse_raster, resample, select
+from app.io.resample import (
+    Raster,
+    Track,
+    held_by_values,
+    parse_raster,
+    resample,
+    select,
+    shared_time_base,
+)
 from estimation import Signals
 from estimation.errors import SignalError
+
+if TYPE_CHECKING:
+    from app.io.csv_files import SparseCsv
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 MDF_MAGIC = b"MDF     "
@@ -57,13 +68,19 @@ class IngestLimits:
 @dataclass(frozen=True, slots=True)
 class ParsedLog:
     """A validated log: ``signals`` (time in s, float64 channels with units), provenance,
-    notes, and the masked (non-finite or invalid) samples per kept channel that has any."""
+    notes, and the masked (non-finite or invalid) samples per kept channel that has any.
+
+    ``recorded``: the kept channels as recorded, when they are on different timestamps and
+    no raster was asked for; ``signals`` is then their whole-log read on the default raster
+    (the slowest kept channel's), and the dataset is stored as recorded so that each run
+    reads its own channels on the slowest raster among them."""
 
     signals: Signals
     source: str
     time_column: str | None
     notes: tuple[str, ...] = ()
     masked: Mapping[str, int] = field(default_factory=dict)
+    recorded: tuple[Track, ...] = ()
 
     @property
     def rows(self) -> int:
@@ -164,7 +181,7 @@ def ingest(
             time_required=time_required,
         )
         used_time = log.time_column
-        tracks = _sparse_tracks(log.time, log.columns, log.units, log.empty, grid, notes)
+        tracks = _sparse_tracks(log, grid, notes)
     kept = select(tracks, wanted)
     _check_recorded(kept, limits)
     table = resample(kept, grid, max_rows=limits.max_rows, max_values=limits.max_values)
@@ -175,7 +192,18 @@ def ingest(
     if kind != "csv":  # CSV units are applied while parsing (the units row rule)
         signals = _apply_units(signals, units)
     _check_shape(signals, limits)
-    return ParsedLog(signals, kind, used_time, (*notes, *table.notes), dict(table.masked))
+    said = [*notes, *table.notes]
+    recorded: tuple[Track, ...] = ()
+    if grid == Raster():
+        usable = [t for t in kept if t.name in table.channels]
+        if not shared_time_base(usable):
+            recorded = tuple(usable)
+            said.append(
+                "stored as recorded, each channel on its own timestamps: a run reads the "
+                "channels it needs on the slowest raster among them (the whole log: the "
+                "raster above)"
+            )
+    return ParsedLog(signals, kind, used_time, tuple(said), dict(table.masked), recorded)
 
 
 def _tracks_of(signals: Signals, *, classify: bool) -> list[Track]:
@@ -189,29 +217,24 @@ def _tracks_of(signals: Signals, *, classify: bool) -> list[Track]:
     ]
 
 
-def _sparse_tracks(
-    time: np.ndarray,
-    columns: Mapping[str, np.ndarray],
-    units: Mapping[str, str],
-    empty: Mapping[str, int],
-    grid: Raster,
-    notes: list[str],
-) -> list[Track]:
+def _sparse_tracks(log: SparseCsv, grid: Raster, notes: list[str]) -> list[Track]:
     """CSV columns as tracks: a column with empty cells has samples only on its filled rows
-    (noted); hold or interpolate from the values when anything is to be resampled."""
-    classify = grid != Raster() or any(empty.values())
+    (noted); a written ``nan``/``inf`` is a masked sample (NaN), counted by
+    :func:`app.io.resample.resample` like MDF's; hold or interpolate from the values when
+    anything is to be resampled."""
+    classify = grid != Raster() or any(log.empty.values()) or bool(log.masked_rows)
     tracks = []
-    for name, values in columns.items():
-        if empty[name]:
-            filled = ~np.isnan(values)
+    for name, values in log.columns.items():
+        if log.empty[name]:
+            filled = log.sampled(name)
             notes.append(
                 f"column {name!r}: a value on {int(filled.sum())} of {values.size} rows "
                 "(empty cells: no sample)"
             )
-            t, v = time[filled], values[filled]
+            t, v = log.time[filled], values[filled]
         else:
-            t, v = time, values
-        tracks.append(Track(name, units[name], t, v, classify and held_by_values(v)))
+            t, v = log.time, values
+        tracks.append(Track(name, log.units[name], t, v, classify and held_by_values(v)))
     return tracks
 
 

@@ -22,6 +22,10 @@ one time base (the rules of `docs/data-formats.md#multi-rate`):
 
 When every kept channel already has the same timestamps, no sample is masked and no rate
 is asked for, the channels are returned unchanged and no note is written.
+
+:func:`shared_time_base` tells whether the tracks are on one time base: an upload whose
+aren't, with no raster asked for, is stored as recorded and resampled when it is read, onto
+the slowest raster among the channels that read needs (:mod:`app.store.datasets`).
 """
 
 from __future__ import annotations
@@ -83,13 +87,15 @@ class Raster:
 
 @dataclass(frozen=True, slots=True)
 class Resampled:
-    """The common time base, the kept channels on it, and what was done (for the notes)."""
+    """The common time base, the kept channels on it, what was done (for the notes), and
+    the raster used (``None``: the channels' own shared time base, unchanged)."""
 
     time: np.ndarray
     channels: dict[str, np.ndarray]
     units: dict[str, str]
     masked: dict[str, int]
     notes: list[str]
+    raster: Raster | None = None
 
 
 def parse_raster(text: str | None) -> Raster:
@@ -204,7 +210,7 @@ def resample(
             if part
         )
     )
-    return Resampled(time, channels, {t.name: t.unit for t in usable}, masked, notes)
+    return Resampled(time, channels, {t.name: t.unit for t in usable}, masked, notes, raster)
 
 
 def _usable(tracks: Sequence[Track], notes: list[str]) -> list[Track]:
@@ -241,6 +247,12 @@ def _unchanged(tracks: Sequence[Track], raster: Raster) -> bool:
     clean = all(t.masked == 0 for t in tracks)
     named = raster.channel is None or raster.channel in {t.name for t in tracks}
     return same and clean and raster.step is None and named
+
+
+def shared_time_base(tracks: Sequence[Track]) -> bool:
+    """Every track has the same timestamps (true of none or one)."""
+    first = tracks[0].time if tracks else None
+    return all(t.time is first or np.array_equal(t.time, first) for t in tracks)
 
 
 def _median_step(time: np.ndarray) -> float:

@@ -11,6 +11,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from app.errors import InvalidRequestError
+from app.io.errors import InputError
+from app.io.resample import Raster, parse_raster
 
 MAX_VERSIONS = 1000  # persisted versions per run (each carries the map and estimator state)
 MIN_PACE = 0.01  # slowest replay, × real time: a slower one holds a worker for ages
@@ -23,6 +25,26 @@ class RunOptions:
     pace: float | None  # real-time multiple; None: as fast as possible
     version_every: int  # samples between persisted map versions
     gates: list[dict[str, Any]]
+
+
+def run_raster(config: dict[str, Any]) -> Raster | None:
+    """The raster a run asks for (``config.raster``: ``"100Hz"``, ``"10ms"``,
+    ``"channel:NAME"``), ``None`` without one: the slowest among its channels. It applies to
+    a dataset stored as recorded (`docs/data-formats.md#multi-rate`); 422 on
+    ``config.raster`` for anything :func:`~app.io.resample.parse_raster` refuses."""
+    value = config.get("raster")
+    if value is None:
+        return None
+    if not isinstance(value, str):
+        raise InvalidRequestError(
+            f"raster must be a string such as '10ms' or 'channel:NAME', got {value!r}",
+            field="config.raster",
+        )
+    try:
+        raster = parse_raster(value)
+    except InputError as exc:
+        raise InvalidRequestError(str(exc), field="config.raster") from None
+    return None if raster == Raster() else raster
 
 
 def run_options(config: dict[str, Any], rows: int, rate_hz: float, fraction: float) -> RunOptions:

@@ -3,7 +3,9 @@
 The worker reads everything it needs from the database (the run, its dataset's row, the
 last persisted version when resuming) and the artifact store (the dataset's samples, their
 hash checked, only the channels the run reads: :func:`~app.runs.results.channels_read` and
-the gates') and writes its results to the database, so it can run in any process sharing
+the gates'; a dataset stored as recorded is read on the slowest raster among those channels,
+whose step the run's metrics keep as ``raster_s``, `docs/data-formats.md#multi-rate`) and
+writes its results to the database, so it can run in any process sharing
 both. :class:`RunSession` only orchestrates, per chunk: fold the
 estimator's snapshot into the results (:mod:`app.runs.results`), persist a map version at
 the run's cadence with the estimator state, so a resumed run continues bit-for-bit
@@ -30,9 +32,9 @@ from app.runs.attempt import Attempt, database
 from app.runs.gates import apply_gates, parse_gates
 from app.runs.limits import out_of_memory_message
 from app.runs.live import LiveTicks, Publish
-from app.runs.options import run_options
+from app.runs.options import run_options, run_raster
 from app.runs.results import RunResults, channels_read
-from app.store import default_store_url, load_signals, open_store
+from app.store import default_store_url, load_on_raster, open_store
 from estimation.estimator import Snapshot
 from estimation.registry import get_spec, load_state
 
@@ -105,6 +107,7 @@ class RunSession:
         self.db = database(context.database_url)
         self.live = LiveTicks(run_id, context.live_fps, publish)
         self.results: RunResults | None = None
+        self.raster_s: float | None = None  # the step of a raster made when reading
         self.version_sample = 0  # first sample not yet in a persisted version
         self.last_progress = 0.0  # monotonic time of the last progress write
         self.last_stop_check = 0.0
@@ -169,11 +172,17 @@ class RunSession:
         spec = get_spec(self.run.estimator)
         self.estimator = spec.build(self.run.estimator_config)
         names = channels_read(self.run, self.estimator, truth) + gate_channels(self.run.config)
+        raster = run_raster(self.run.config)
+        if raster is not None and raster.channel is not None:
+            names.append(raster.channel)
         store = open_store(self.ctx.store_url)
-        signals = load_signals(store, loaded.samples, dataset.channels, names)
-        self.rate_hz = dataset.rate_hz
+        read = load_on_raster(store, loaded.samples, dataset.channels, names, raster=raster)
+        signals = read.signals
+        # a dataset stored as recorded: the rate of the raster this run's channels set
+        self.raster_s = read.step_s
+        self.rate_hz = dataset.rate_hz if read.step_s is None else 1.0 / read.step_s
         self.options = run_options(
-            self.run.config, len(signals), dataset.rate_hz, self.ctx.version_fraction
+            self.run.config, len(signals), self.rate_hz, self.ctx.version_fraction
         )
         gates = None
         if self.options.gates:
@@ -327,6 +336,8 @@ class RunSession:
         results = self.results
         assert results is not None
         metrics = results.metrics(snap, run_s)
+        if self.raster_s is not None:
+            metrics["raster_s"] = self.raster_s
         self.attempt.complete(
             self._version_fields(snap, final=True),
             metrics=metrics,

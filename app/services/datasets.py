@@ -1,17 +1,20 @@
 """Datasets: ingest an upload, simulate a scenario, list, preview, delete.
 
 The samples are one Parquet object in the artifact store (:mod:`app.store`, time + channels,
-float64), its key and SHA-256 in the dataset's row, so any worker process or machine sharing
-the database and the store can run on them. The object is written before the row commits
-(removed again if the commit fails) and deleted after the row's delete commits. A simulated
-dataset keeps its truth (true map, scoring points, true series) in the row, for the run
-metrics.
+float64; an upload whose channels are on different timestamps and came without a raster is
+stored as recorded, and each read puts the channels it needs on the slowest raster among
+them, `docs/data-formats.md#multi-rate`), its key and SHA-256 in the dataset's row, so any
+worker process or machine sharing the database and the store can run on them. The object is
+written before the row commits (removed again if the commit fails) and deleted after the
+row's delete commits. A simulated dataset keeps its truth (true map, scoring points, true
+series) in the row, for the run metrics.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any, BinaryIO
 
 import numpy as np
@@ -21,15 +24,17 @@ from app.db.repositories import DatasetRepo, RunRepo
 from app.domain import Channel, Dataset, Page, RunStatus
 from app.errors import ConflictError, InvalidRequestError
 from app.io.decimate import finite_or_none, minmax_decimate
-from app.io.ingest import IngestLimits, ingest
+from app.io.ingest import IngestLimits, ParsedLog, ingest
 from app.io.names import check_name, without_refused
 from app.io.payload import pack_truth
 from app.store import (
     ArtifactStore,
+    StagedDataset,
     delete_dataset,
     load_signals,
     open_store,
     save_staged,
+    stage_recorded,
     stage_signals,
 )
 from estimation.errors import EstimationError
@@ -49,15 +54,29 @@ def _dataset_name(name: str | None, filename: str | None, fallback: str) -> str:
     return (text or fallback)[:NAME_MAX]
 
 
+def _timing(parsed: ParsedLog) -> dict[str, tuple[float, float, float]]:
+    """Per channel stored as recorded: its first and last valid time and its median time
+    step (the resample rule's, :func:`app.io.resample.resample`), so a run's rows and rate
+    are known before its samples are read (:meth:`Dataset.rows_for`)."""
+    timing = {}
+    for track in parsed.recorded:
+        valid = track.time[track.valid]
+        step = float(np.median(np.diff(track.time)))
+        timing[track.name] = (float(valid[0]), float(valid[-1]), step)
+    return timing
+
+
 class DatasetService:
     def __init__(self, db: Database, store: ArtifactStore | None = None) -> None:
         self.db = db
         self.store = store or open_store()
 
-    def _store(self, signals: Signals, add: Callable[[DatasetRepo], Dataset]) -> Dataset:
+    def _store(
+        self, signals: Signals | ParsedLog, add: Callable[[DatasetRepo], Dataset]
+    ) -> Dataset:
         """Stage the samples as Parquet, add the row, put the object under the row's id and
         commit; an object whose row did not commit is removed again."""
-        with stage_signals(self.store, signals) as staged:
+        with self._staged(signals) as staged:
             stored: tuple[int, str] | None = None
             try:
                 with self.db.write() as s:
@@ -70,6 +89,21 @@ class DatasetService:
                 if stored is not None:
                     delete_dataset(self.store, *stored)
                 raise
+
+    @contextlib.contextmanager
+    def _staged(self, samples: Signals | ParsedLog) -> Iterator[StagedDataset]:
+        """Signals as they are; a parsed upload as recorded when ingest kept its channels on
+        their own timestamps (:attr:`ParsedLog.recorded`), else its signals."""
+        if isinstance(samples, Signals):
+            with stage_signals(self.store, samples) as staged:
+                yield staged
+        elif samples.recorded:
+            units = dict(samples.signals.units)
+            with stage_recorded(self.store, samples.recorded, units) as staged:
+                yield staged
+        else:
+            with stage_signals(self.store, samples.signals) as staged:
+                yield staged
 
     def upload(
         self,
@@ -87,9 +121,13 @@ class DatasetService:
         """Parse and validate the whole file first; store it only if it is usable, with
         what ingest said about it: its notes and the masked samples per channel
         (`docs/data-formats.md#multi-rate`). ``channels``: the channels to keep (default
-        all); ``raster``: ``100Hz``, ``10ms`` or ``channel:NAME`` (default the slowest kept
-        channel's raster); ``rate_hz``: the rows' sample rate of a CSV without a time
-        column, which is refused without it (a guessed time base is no time base)."""
+        all); ``raster``: ``100Hz``, ``10ms`` or ``channel:NAME``, the samples resampled
+        onto it now; without one, channels on different timestamps are stored as recorded
+        and each read resamples the channels it needs onto the slowest raster among them
+        (the row's ``rows``, ``rate_hz`` and ``duration_s`` describe the whole-log read, on
+        the slowest kept channel's raster); ``rate_hz``: the rows' sample rate of a CSV
+        without a time column, which is refused without it (a guessed time base is no time
+        base)."""
         given = _dataset_name(name, filename, "")  # a bad name fails before the file is read
         limits = IngestLimits(max_bytes=max_bytes, max_decompressed_bytes=max_decompressed_bytes)
         parsed = ingest(
@@ -101,8 +139,9 @@ class DatasetService:
             rate_hz=rate_hz,
             time_required=True,
         )
+        timing = _timing(parsed)
         return self._store(
-            parsed.signals,
+            parsed,
             lambda repo: repo.add(
                 name=given or f"{parsed.source} upload",
                 source=parsed.source,
@@ -111,7 +150,12 @@ class DatasetService:
                 duration_s=parsed.duration_s,
                 time_column=parsed.time_column or "",
                 channels=[
-                    Channel(c["name"], c["unit"], parsed.masked.get(c["name"], 0))
+                    Channel(
+                        c["name"],
+                        c["unit"],
+                        parsed.masked.get(c["name"], 0),
+                        timing.get(c["name"]),
+                    )
                     for c in parsed.channels
                 ],
                 notes=parsed.notes,

@@ -16,7 +16,9 @@ from app.domain import MapVersion, Run, SeriesRole
 from app.errors import ConflictError, InvalidRequestError
 from app.io.errors import InputError
 from app.io.map_json import map_document
+from app.runs.options import run_raster
 from app.services import calibration_runs as cal
+from app.services.truth_map import map_quantity
 from app.store import load_signals, open_store
 from estimation.estimator import Snapshot
 from estimation.signals import Signals
@@ -99,8 +101,9 @@ class RunExports:
                 "with calibration: {ecu_id, map}",
                 field="format",
             )
+        quantity, unit = map_quantity(run)
         if fmt == "json":
-            document = self._map_document(run, version)
+            document = self._map_document(run, version) | {"quantity": quantity, "unit": unit}
             if linked is not None:
                 try:
                     document |= cal.json_extras(linked.char, table_of(version), linked.to_json())
@@ -110,16 +113,14 @@ class RunExports:
         table = table_of(version)
         if linked is not None:
             return self._calibration_export(run, version, linked, table, fmt, stem)
-        output = run.estimator_config.get("output")
-        unit = str(run.estimator_config.get("output_unit", ""))
         if fmt == "csv":
             from app.io.export import map_to_csv
 
-            text = map_to_csv(table, value_name=str(output or "value"), value_unit=unit)
+            text = map_to_csv(table, value_name=quantity or "value", value_unit=unit)
             return Download(text.encode(), "text/csv; charset=utf-8", f"{stem}.csv")
         from app.io.export import map_to_dcm
 
-        name = _safe_name(str(output or run.estimator)).upper()
+        name = _safe_name(quantity or run.estimator).upper()
         description = _dcm_description(run, version)
         text = map_to_dcm(table, name=name, unit=unit, description=description)
         return Download(text.encode(), "text/plain; charset=utf-8", f"{stem}.dcm")
@@ -164,16 +165,26 @@ class RunExports:
         return map_document(snapshot, samples=version.summary.step, estimate_s=estimate_s)
 
     def _run_signals(self, run: Run) -> Signals:
-        """The run's channels and per-sample outputs at full rate (outputs where all finite)."""
+        """The run's channels and per-sample outputs at full rate (outputs where all finite).
+
+        The samples are read as the run's worker read them: the same channels, so a dataset
+        stored as recorded comes back on the raster the run used
+        (`docs/data-formats.md#multi-rate`)."""
         with self.db.read() as s:
             datasets = DatasetRepo(s)
             dataset = datasets.get(run.dataset_id)
             stored = datasets.samples(run.dataset_id)
+            truth = datasets.truth(run.dataset_id)
             segments = VersionRepo(s).segments(run.id)
         used = [a["name"] for a in (run.table or {}).get("axes", [])] + list(run.signals.values())
         names = [n for n in dict.fromkeys(used) if n in {c.name for c in dataset.channels}]
         store = open_store(self.settings.store_url)
-        signals = load_signals(store, stored, dataset.channels, names or None)
+        raster = run_raster(run.config)
+        read = _read_by_run(run, truth) + names
+        if raster is not None and raster.channel is not None:
+            read.append(raster.channel)
+        read = list(dict.fromkeys(read))
+        signals = load_signals(store, stored, dataset.channels, read or None, raster=raster)
         names = names or signals.names
         outputs: dict[str, list[np.ndarray]] = {}
         for segment in segments:
@@ -190,12 +201,13 @@ class RunExports:
                 start = max(start, int(np.argmax(finite)))
         channels = {name: signals[name][start:] for name in names}
         units = {name: signals.units[name] for name in names}
+        output_units = _output_units(run)
         for name, values in full.items():
             if np.all(np.isfinite(values[start:])):
                 # an estimate named like an input channel (the EKF's p_im_pa) keeps both
                 key = name if name not in channels else f"{SeriesRole.OUTPUT}:{name}"
                 channels[key] = values[start:]
-                units[key] = ""
+                units[key] = output_units.get(name, "")
         return Signals(signals.time[start:], channels, units)
 
     def _mcap(self, run: Run) -> bytes:
@@ -234,6 +246,24 @@ class RunExports:
         return series_to_csv(signals.time, channels).encode()
 
 
+def _read_by_run(run: Run, truth: bytes | None) -> list[str]:
+    """The channels the run's worker read (:func:`app.runs.results.channels_read` and the
+    gates'), ``[]`` when its estimator no longer builds from its config (then every channel
+    is read)."""
+    from app.io.payload import unpack_truth
+    from app.runs.results import channels_read
+    from app.runs.worker import gate_channels
+    from estimation.errors import EstimationError
+    from estimation.registry import get_spec
+
+    try:
+        estimator = get_spec(run.estimator).build(run.estimator_config)
+    except (EstimationError, ValueError, KeyError):
+        return []
+    unpacked = None if truth is None else unpack_truth(truth)
+    return channels_read(run, estimator, unpacked) + gate_channels(run.config)
+
+
 def _dcm_description(run: Run, version: MapVersion) -> str:
     """The DCM header line of an exported version: the run and the version's number 1…n in
     it (what the dashboard shows and links), the database id kept for traceability."""
@@ -245,3 +275,14 @@ def _json_bytes(document: dict[str, Any]) -> bytes:
     import json
 
     return json.dumps(document).encode()
+
+
+def _output_units(run: Run) -> dict[str, str]:
+    """The unit of each per-sample estimator output of a run: the registry's
+    ``output_units`` (docs/adding-an-estimator.md), where ``""`` means the unit of the run's
+    output channel, as the stored series (``app.runs.results``) have it."""
+    from estimation.registry import get_spec
+
+    out_unit = str(run.estimator_config.get("output_unit") or "")
+    spec = get_spec(run.estimator)
+    return {name: unit or out_unit for name, unit in spec.output_units.items()}

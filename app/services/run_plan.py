@@ -21,14 +21,14 @@ from app.domain import BaseMap, Dataset
 from app.errors import InvalidRequestError, field_of
 from app.io.columns import same_unit
 from app.io.names import check_name, name_schema
-from app.runs.options import run_options
+from app.runs.options import run_options, run_raster
 from app.services.admission import Limits, Prediction, admit_run, check_cells
 from app.services.catalog import TABLE_ROLE, EstimatorName, kind_of, needs_table, roles
 from estimation.errors import ConfigError, EstimationError
 from estimation.registry import EstimatorSpec, registry
 from estimation.table import Axis, Grid, broadcast_cells
 
-SERVICE_KEYS = ("pace", "version_every", "gates", "locked")
+SERVICE_KEYS = ("pace", "version_every", "gates", "locked", "raster")
 
 
 class AxisSpec(BaseModel):
@@ -232,7 +232,6 @@ def plan_run(
     spec = _spec(request.estimator)
     kind = kind_of(spec)
     config = dict(request.config)
-    options = run_options(config, dataset.rows, dataset.rate_hz, version_fraction)
     estimator_config = {k: v for k, v in config.items() if k not in SERVICE_KEYS}
     role_map = {r.role: r for r in roles(spec)}
     for role, column in request.signals.items():
@@ -245,6 +244,8 @@ def plan_run(
     axes = _axes(request.table, base_map, dataset) if needs_table(spec) else None
     if request.table is not None and not needs_table(spec):
         raise InvalidRequestError(f"{spec.name} has no table", field="table")
+    rows, rate_hz = _rows(dataset, _channels_named(request, axes, config), config)
+    options = run_options(config, rows, rate_hz, version_fraction)
     if axes is not None and limits is not None:
         cells = math.prod(len(a["breakpoints"]) for a in axes)
         check_cells(cells, limits, field="table.axes", spec=spec)
@@ -290,7 +291,7 @@ def plan_run(
 
         parse_gates(options.gates, [c.name for c in dataset.channels], field="config.gates")
     model = _validate_config(spec, estimator_config)
-    _check_delay(model, dataset)
+    _check_delay(model, dataset, rows)
     prediction = None
     if limits is not None:
         cells, corners = spec.cost.size(model)
@@ -298,7 +299,7 @@ def plan_run(
             spec,
             cells=cells,
             corners=corners,
-            samples=dataset.rows,
+            samples=rows,
             channels=len(dataset.channels),
             version_every=options.version_every,
             log_duration_s=dataset.duration_s,
@@ -319,22 +320,60 @@ def plan_run(
         table_spec=None if axes is None else {"axes": axes},
         config=config,
         produces_map=spec.produces_map,
-        n_samples=dataset.rows,
+        n_samples=rows,
         name=_run_name(request.name) or f"{spec.name} on {dataset.name}",
         prediction=prediction,
     )
 
 
-def _check_delay(model: BaseModel, dataset: Dataset) -> None:
+def _channels_named(
+    request: RunRequest, axes: list[dict[str, Any]] | None, config: dict[str, Any]
+) -> list[str]:
+    """The channels a run's request names (its table's axes, its signals, its gates'): on a
+    dataset stored as recorded they set the run's raster (:meth:`Dataset.rows_for`; the
+    worker reads them with the estimator's own, :func:`app.runs.results.channels_read`)."""
+    names = [a["name"] for a in axes or []] + list(request.signals.values())
+    gates = config.get("gates")
+    if isinstance(gates, list):
+        names += [g["channel"] for g in gates if isinstance(g, dict) and "channel" in g]
+    return [n for n in names if isinstance(n, str)]
+
+
+def _rows(dataset: Dataset, names: list[str], config: dict[str, Any]) -> tuple[int, float]:
+    """The rows and rate of the run's read (:meth:`Dataset.rows_for`), on the raster its
+    ``config.raster`` asks for (:func:`run_raster`; only on a dataset stored as recorded,
+    whose channel a channel raster must be) or the slowest among its channels."""
+    raster = run_raster(config)
+    if raster is None:
+        return dataset.rows_for(names)
+    if not dataset.recorded:
+        raise InvalidRequestError(
+            f"dataset {dataset.id} is stored on one time base (uploaded with a raster, or "
+            "its channels share their timestamps): a run's raster applies only to a dataset "
+            "stored as recorded; give the raster at upload",
+            field="config.raster",
+        )
+    if raster.channel is None:
+        return dataset.rows_for(names, raster.step)
+    timing = dataset.timing_of(raster.channel)
+    if timing is None:
+        raise InvalidRequestError(
+            f"raster channel {raster.channel!r} is not in dataset {dataset.id}",
+            field="config.raster",
+        )
+    return dataset.rows_for([*names, raster.channel], timing[2])
+
+
+def _check_delay(model: BaseModel, dataset: Dataset, rows: int) -> None:
     """A sensor delay must be shorter than the log (else no sample has a measurement)."""
     sensor = getattr(model, "sensor", None)
     if sensor is None:
         return
     if sensor.delay_samples is not None:
-        if sensor.delay_samples >= dataset.rows:
+        if sensor.delay_samples >= rows:
             raise InvalidRequestError(
                 f"a delay of {sensor.delay_samples:,} samples is not shorter than the log "
-                f"({dataset.rows:,} samples)",
+                f"({rows:,} samples)",
                 field="config.sensor.delay_samples",
             )
     elif sensor.delay_s and sensor.delay_s >= dataset.duration_s:

@@ -6,14 +6,17 @@ docs/data-formats.md#stored-datasets describes the layout.
 """
 
 from app.store.datasets import (
+    LoadedSignals,
     StagedDataset,
     dataset_key,
     delete_dataset,
     load_columns,
+    load_on_raster,
     load_signals,
     open_verified,
     save_staged,
     stage_columns,
+    stage_recorded,
     stage_signals,
 )
 from app.store.errors import ArtifactCorruptError, ArtifactError, ArtifactMissingError
@@ -26,16 +29,19 @@ __all__ = [
     "ArtifactError",
     "ArtifactMissingError",
     "ArtifactStore",
+    "LoadedSignals",
     "StagedDataset",
     "dataset_key",
     "default_store_url",
     "delete_dataset",
     "load_columns",
+    "load_on_raster",
     "load_signals",
     "open_store",
     "open_verified",
     "resolve_store_url",
     "save_staged",
     "stage_columns",
+    "stage_recorded",
     "stage_signals",
 ]

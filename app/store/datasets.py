@@ -7,6 +7,11 @@ hash, then, through the same handle, decodes only the channels asked for
 reaches an estimator, and a run holds only the channels it uses, never the file's bytes.
 The nonce keeps two databases sharing a store (a restored backup, a test suite) from ever
 writing or deleting each other's objects.
+
+A dataset stored *as recorded* (its channels on their own timestamps, :func:`stage_recorded`)
+is put on one raster when it is read: the channels asked for, with
+:func:`app.io.resample.resample`, on the raster asked for, by default the slowest among
+*those* channels (`docs/data-formats.md#multi-rate`). A dense dataset is read as stored.
 """
 
 from __future__ import annotations
@@ -26,9 +31,18 @@ import numpy as np
 import pyarrow as pa
 
 from app.domain import Channel, StoredSamples
+from app.io.errors import InputError
+from app.io.ingest import IngestLimits
+from app.io.resample import Raster, Track, resample
 from app.store.errors import ArtifactCorruptError, ArtifactMissingError
 from app.store.objects import ArtifactStore
-from app.store.parquet_signals import HASH_CHUNK, Column, SignalsFile, write_columns
+from app.store.parquet_signals import (
+    HASH_CHUNK,
+    Column,
+    SignalsFile,
+    write_columns,
+    write_recorded,
+)
 from estimation.signals import Signals
 
 log = logging.getLogger("mapwise.store")
@@ -52,6 +66,20 @@ def stage_signals(store: ArtifactStore, signals: Signals) -> Iterator[StagedData
     channels = [Column(n, signals.units.get(n, ""), signals[n]) for n in signals.names]
     with _staging_file(store) as path:
         yield StagedDataset(path, write_columns(path, signals.time, channels))
+
+
+@contextlib.contextmanager
+def stage_recorded(
+    store: ArtifactStore, tracks: Sequence[Track], units: dict[str, str]
+) -> Iterator[StagedDataset]:
+    """Write channels recorded on their own timestamps as one Parquet file as recorded
+    (:func:`~app.store.parquet_signals.write_recorded`), with their hold flags; ``units``
+    by channel name (those after the upload's overrides)."""
+    pairs = [
+        (Column(t.name, units.get(t.name, t.unit), t.values, hold=t.hold), t.time) for t in tracks
+    ]
+    with _staging_file(store) as path:
+        yield StagedDataset(path, write_recorded(path, pairs))
 
 
 @contextlib.contextmanager
@@ -146,22 +174,68 @@ def load_columns(
             ) from exc
 
 
+@dataclass(frozen=True, slots=True)
+class LoadedSignals:
+    """Samples read for a use: ``raster`` describes the raster a dataset stored as recorded
+    was put on (``None``: a dense dataset, read as stored) and ``step_s`` its median step."""
+
+    signals: Signals
+    raster: str | None = None
+    step_s: float | None = None
+
+
 def load_signals(
     store: ArtifactStore,
     stored: StoredSamples,
     channels: Sequence[Channel],
     names: Collection[str] | None = None,
+    *,
+    raster: Raster | None = None,
 ) -> Signals:
     """The dataset's samples, with the channels' names, order and units of its row; only
     the channels in ``names`` (default all; a name the dataset lacks is ignored, so the
-    estimator's own check names it)."""
+    estimator's own check names it). A dataset stored as recorded is resampled
+    (:func:`load_on_raster`)."""
+    return load_on_raster(store, stored, channels, names, raster=raster).signals
+
+
+def load_on_raster(
+    store: ArtifactStore,
+    stored: StoredSamples,
+    channels: Sequence[Channel],
+    names: Collection[str] | None = None,
+    *,
+    raster: Raster | None = None,
+) -> LoadedSignals:
+    """:func:`load_signals` and the raster used. A dataset stored as recorded has its
+    channels in ``names`` put on ``raster`` (default: the slowest among them, the rules of
+    `docs/data-formats.md#multi-rate`); a raster that cannot be made (a channel it does not
+    read, too many rows) raises :class:`~app.io.errors.InputError`."""
     dataset_id, key = stored.dataset_id, stored.key
     expect = [c.name for c in channels]
     time, columns = load_columns(store, dataset_id, key, stored.sha256, names, expect=expect)
-    by_name = {c.name: c.values for c in columns}
-    del columns
-    units = {c.name: c.unit for c in channels if c.name in by_name}
-    return Signals(time, by_name, units, copy=False)
+    units = {c.name: c.unit for c in channels}
+    if not columns or columns[0].present is None:
+        by_name = {c.name: c.values for c in columns}
+        del columns
+        return LoadedSignals(Signals(time, by_name, {n: units[n] for n in by_name}, copy=False))
+    tracks = [
+        Track(c.name, units[c.name], time[c.present], c.values[c.present], c.hold) for c in columns
+    ]
+    del columns, time
+    limits = IngestLimits()
+    try:
+        table = resample(
+            tracks, raster or Raster(), max_rows=limits.max_rows, max_values=limits.max_values
+        )
+    except InputError as exc:
+        raise InputError(f"dataset {dataset_id}: {exc}", field=exc.field) from None
+    step = float(np.median(np.diff(table.time))) if table.time.size > 1 else None
+    used = table.raster or Raster(channel=tracks[0].name)  # None: one shared time base
+    described = used.describe()
+    return LoadedSignals(
+        Signals(table.time, table.channels, table.units, copy=False), described, step
+    )
 
 
 def delete_dataset(store: ArtifactStore, dataset_id: int, key: str) -> bool:

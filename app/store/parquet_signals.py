@@ -5,6 +5,12 @@ Each field's metadata holds its ``unit`` (the time's is ``s``) and its ``role`` 
 ``channel``); the schema's ``mapwise`` metadata names the format and the time field. Columns
 are stored plain (no dictionary) and zstd-compressed, so every value, including ``-0.0``,
 reads back bit for bit. Any Parquet reader (pandas, DuckDB, Polars) opens the file.
+
+A file *as recorded* (schema metadata ``"layout": "recorded"``, written by
+:func:`write_recorded`) holds channels recorded on different timestamps: the time column is
+the union of their timestamps and each channel is null where it has no sample (as a sparse
+CSV export); NaN is a masked sample. Its channel fields are nullable and carry ``hold``
+(``1``: held, previous value; ``0``: interpolated), `docs/data-formats.md#multi-rate`.
 """
 
 from __future__ import annotations
@@ -28,9 +34,14 @@ HASH_CHUNK = 1 << 20
 
 @dataclass(frozen=True, slots=True)
 class Column:
+    """A channel's values (NaN where masked); in a file as recorded, ``present`` marks the
+    rows where it has a sample and ``hold`` says how it is resampled."""
+
     name: str
     unit: str
     values: np.ndarray
+    present: np.ndarray | None = None
+    hold: bool = False
 
 
 def _time_field_name(channels: Sequence[Column]) -> str:
@@ -62,8 +73,49 @@ def write_columns(
     return file_sha256(path)
 
 
-def _field(name: str, unit: str, role: str) -> pa.Field:
-    return pa.field(name, pa.float64(), nullable=False, metadata={"unit": unit, "role": role})
+def write_recorded(
+    path: str | os.PathLike[str], tracks: Sequence[tuple[Column, np.ndarray]]
+) -> str:
+    """Write channels recorded on their own timestamps (``(column, time)`` pairs, each time
+    strictly increasing) as one file as recorded: the union of the timestamps, each channel
+    null on the rows where it has no sample. Returns the SHA-256 (hex) of its bytes."""
+    columns = [c for c, _ in tracks]
+    time = np.unique(np.concatenate([t for _, t in tracks]))
+    time_name = _time_field_name(columns)
+    fields = [_field(time_name, "s", "time")] + [
+        _field(c.name, c.unit, "channel", hold=c.hold) for c in columns
+    ]
+    meta = {"format": FORMAT, "time": time_name, "rows": int(time.size), "layout": "recorded"}
+    schema = pa.schema(fields, metadata={SCHEMA_KEY: json.dumps(meta).encode()})
+    arrays = [time]
+    masks = [np.zeros(time.size, dtype=bool)]
+    for column, own in tracks:
+        at = np.searchsorted(time, own)  # exact: every own time is in the union
+        values = np.zeros(time.size, dtype=np.float64)
+        values[at] = column.values
+        absent = np.ones(time.size, dtype=bool)
+        absent[at] = False
+        arrays.append(values)
+        masks.append(absent)
+    with pq.ParquetWriter(path, schema, compression="zstd", use_dictionary=False) as writer:
+        for start in range(0, max(1, time.size), ROW_GROUP_ROWS):
+            stop = start + ROW_GROUP_ROWS
+            batch = pa.record_batch(
+                [
+                    pa.array(a[start:stop], mask=m[start:stop] if m.any() else None)
+                    for a, m in zip(arrays, masks, strict=True)
+                ],
+                schema=schema,
+            )
+            writer.write_batch(batch, row_group_size=ROW_GROUP_ROWS)
+    return file_sha256(path)
+
+
+def _field(name: str, unit: str, role: str, *, hold: bool | None = None) -> pa.Field:
+    if hold is None:
+        return pa.field(name, pa.float64(), nullable=False, metadata={"unit": unit, "role": role})
+    meta = {"unit": unit, "role": role, "hold": "1" if hold else "0"}
+    return pa.field(name, pa.float64(), nullable=True, metadata=meta)
 
 
 def file_sha256(path: str | os.PathLike[str]) -> str:
@@ -83,6 +135,8 @@ class SignalsFile:
     time_name: str
     rows: int
     channels: list[tuple[str, str]]
+    recorded: bool = False
+    hold: frozenset[str] = frozenset()
 
     @classmethod
     def open(cls, source: pa.NativeFile | BinaryIO | bytes) -> SignalsFile:
@@ -97,19 +151,23 @@ class SignalsFile:
         if reader.metadata.num_rows != meta["rows"]:
             raise ValueError(f"the file has {reader.metadata.num_rows} rows, not {meta['rows']}")
         channels = [(f.name, (f.metadata or {}).get(b"unit", b"").decode()) for f in schema]
-        return cls(reader, meta["time"], int(meta["rows"]), channels[1:])
+        recorded = meta.get("layout") == "recorded"
+        hold = frozenset(f.name for f in schema if (f.metadata or {}).get(b"hold") == b"1")
+        return cls(reader, meta["time"], int(meta["rows"]), channels[1:], recorded, hold)
 
     def read(self, names: Collection[str] | None = None) -> tuple[np.ndarray, list[Column]]:
         """The time and the channels in ``names`` (default: all), in the file's order.
 
         Only those columns' chunks are read and decompressed (column projection), one row
         group at a time into arrays allocated once: the peak is the arrays plus one row
-        group of the chosen columns, whatever the file's other channels hold.
+        group of the chosen columns, whatever the file's other channels hold. In a file as
+        recorded a channel's nulls are its rows without a sample (:attr:`Column.present`).
         """
         wanted = None if names is None else set(names)
         chosen = [c for c in self.channels if wanted is None or c[0] in wanted]
         fields = [self.time_name] + [name for name, _ in chosen]
         arrays = [np.empty(self.rows, dtype=np.float64) for _ in fields]
+        present = [np.empty(self.rows, dtype=bool) for _ in chosen] if self.recorded else []
         start = 0
         batches = self.reader.iter_batches(
             batch_size=ROW_GROUP_ROWS, columns=fields, use_threads=False
@@ -118,15 +176,22 @@ class SignalsFile:
             stop = start + batch.num_rows
             if stop > self.rows:
                 raise ValueError(f"the columns are longer than {self.rows} rows")
-            for array, column in zip(arrays, batch.columns, strict=True):
-                if column.null_count:
+            for k, (array, column) in enumerate(zip(arrays, batch.columns, strict=True)):
+                if column.null_count and (k == 0 or not self.recorded):
                     raise ValueError(f"a column has {column.null_count} missing values")
                 array[start:stop] = column.to_numpy(zero_copy_only=False)
+                if k > 0 and self.recorded:
+                    present[k - 1][start:stop] = column.is_valid().to_numpy(zero_copy_only=False)
             start = stop
         if start != self.rows:
             raise ValueError(f"the columns are {start} rows long, not {self.rows}")
-        columns = [Column(n, u, a) for (n, u), a in zip(chosen, arrays[1:], strict=True)]
-        return arrays[0], columns
+        if not self.recorded:
+            columns = [Column(n, u, a) for (n, u), a in zip(chosen, arrays[1:], strict=True)]
+            return arrays[0], columns
+        return arrays[0], [
+            Column(n, u, a, p, n in self.hold)
+            for (n, u), a, p in zip(chosen, arrays[1:], present, strict=True)
+        ]
 
 
 def read_columns(

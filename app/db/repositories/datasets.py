@@ -18,17 +18,27 @@ def _dataset(row: DatasetRow, has_truth: bool) -> Dataset:
     return from_row(
         Dataset,
         row,
-        channels=[Channel(c["name"], c.get("unit", ""), c.get("masked", 0)) for c in row.channels],
+        channels=[
+            Channel(c["name"], c.get("unit", ""), c.get("masked", 0), _timing(c.get("timing")))
+            for c in row.channels
+        ],
         notes=tuple(row.notes or ()),
         has_truth=has_truth,
     )
 
 
+def _timing(value: Any) -> tuple[float, float, float] | None:
+    return None if value is None else (float(value[0]), float(value[1]), float(value[2]))
+
+
 def _channel_json(channel: Channel) -> dict[str, Any]:
-    """A channel as stored: its masked samples only when there are any."""
+    """A channel as stored: its masked samples only when there are any, its timing only in
+    a dataset stored as recorded."""
     stored: dict[str, Any] = {"name": channel.name, "unit": channel.unit}
     if channel.masked:
         stored["masked"] = channel.masked
+    if channel.timing is not None:
+        stored["timing"] = list(channel.timing)
     return stored
 
 

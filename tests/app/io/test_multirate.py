@@ -202,7 +202,8 @@ def test_a_channel_without_usable_samples_is_dropped(tmp_path: Path) -> None:
 
 
 def test_sparse_csv_export_reads_the_same_way(measurement: Measurement, tmp_path: Path) -> None:
-    """asammdf's export without interpolation: each channel only on its own rows."""
+    """asammdf's export without interpolation: each channel only on its own rows, its
+    non-finite values written out."""
     kept = ["fast", "mode", "status", NMOT, "tmot"]
     path = write_sparse_csv(tmp_path, measurement, kept)
     text = path.read_text()
@@ -215,6 +216,25 @@ def test_sparse_csv_export_reads_the_same_way(measurement: Measurement, tmp_path
     assert any("held (previous value) ['mode', 'status']" in n for n in ds.notes), ds.notes
     rate = ingest(path, raster="channel:fast")
     np.testing.assert_allclose(rate.signals["fast"], FAST[INSIDE])
+
+    # With the pole's channel (-inf at raw 10) and lambda (NaN, +inf and, in MDF4, an
+    # invalid sample): a written -inf/inf is a masked sample counted per channel as from the
+    # MDF, never a refusal; the exporter writes a NaN sample, and an invalid one, as an
+    # empty cell (no sample), so lambda counts only its +inf.
+    kept = ["fast", "mode", POLE, "status", NMOT, "tmot", "lambda"]
+    (tmp_path / "all").mkdir()
+    path = write_sparse_csv(tmp_path / "all", measurement, kept)
+    text = path.read_text()
+    assert text.count(",-inf,") == 10  # the pole, on its own rows
+    ds = ingest(path)
+    assert (ds.source, ds.time_column, ds.signals.names) == ("csv", "timestamps", kept)
+    assert ds.masked == {POLE: 10, "lambda": 1}
+    assert any(f"{POLE!r}: 10 of {T10.size} samples masked" in n for n in ds.notes), ds.notes
+    assert np.all(np.isin(ds.signals.time, T100))  # a 100 ms raster, the slowest
+    check_channels(ds, measurement)
+    every = ingest(path, raster="10ms")
+    assert every.masked == ds.masked
+    check_channels(every, measurement)
 
 
 def test_csv_rules_for_hold_and_for_empty_rows() -> None:
@@ -230,8 +250,12 @@ def test_csv_rules_for_hold_and_for_empty_rows() -> None:
     np.testing.assert_array_equal(fine.signals["fast"], [10, 11, 12, 13, 14])
     with pytest.raises(InputError, match=r"line 3, column 'slow': empty value, and the row"):
         ingest(b"time,slow,fast\n0,1,10\n0.5,,\n1,2,12\n")
-    with pytest.raises(InputError, match="inf is not allowed"):  # explicit: still refused
-        ingest(b"time,slow,fast\n0,1,10\n0.5,,inf\n1,2,12\n")
+    masked = ingest(b"time,slow,fast\n0,1,10\n0.5,,inf\n1,2,12\n")  # written: masked
+    assert masked.masked == {"fast": 1}
+    np.testing.assert_array_equal(masked.signals["fast"], [10.0, 12.0])  # on 'slow': 0, 1 s
+    with pytest.raises(InputError, match="no channel has usable samples") as info:
+        ingest(b"time,slow,fast\n0,1,inf\n0.5,,nan\n1,2,-inf\n", channels=["fast"])
+    assert info.value.field == "file"
 
 
 def test_parse_raster_forms() -> None:

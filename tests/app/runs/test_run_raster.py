@@ -1,0 +1,126 @@
+"""A run on a dataset stored as recorded reads the channels it needs on the slowest raster
+among them (docs/data-formats.md#multi-rate), through the real app: on a multi-rate MDF4
+written by asammdf and uploaded without a raster, a map whose axes and output are all 10 ms
+channels runs on the 10 ms raster, the same map with a 100 ms axis on the 100 ms raster; the
+run is planned with that raster's rows, its metrics say which (``raster_s``), and its
+exports come back on that raster."""
+
+from __future__ import annotations
+
+import csv
+import io
+import warnings
+from pathlib import Path
+
+import pytest
+from fastapi.testclient import TestClient
+
+from tests.support.helpers import log_csv, run_body, start_run, upload, upload_ok, wait_run
+from tests.support.measurements import NMOT, POLE, T10, T100, write_measurement
+
+pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
+
+MODE_AXIS = {"name": "mode", "breakpoints": [0.0, 1.0, 2.0]}
+
+
+@pytest.fixture(scope="module")
+def dataset(client: TestClient, tmp_path_factory: pytest.TempPathFactory) -> dict:  # type: ignore[type-arg]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        measurement = write_measurement(Path(tmp_path_factory.mktemp("raster")))
+    response = upload(client, measurement.bytes(), name="canape.mf4")
+    assert response.status_code == 201, response.text
+    return response.json()
+
+
+STATUS_AXIS = {"name": "status", "breakpoints": [0.0, 3.0, 6.0, 9.0, 12.0]}
+
+
+def _body(dataset_id: int, second_axis: dict, **config: object) -> dict:  # type: ignore[type-arg]
+    return {
+        "dataset_id": dataset_id,
+        "estimator": "skf",
+        "signals": {"y": POLE},
+        "table": {"axes": [MODE_AXIS, second_axis]},
+        "config": {"sigma_w": 0.01, "sigma_v": 0.05, "p0": 10.0, **config},
+    }
+
+
+def _run(client: TestClient, dataset_id: int, second_axis: dict, **config: object) -> dict:  # type: ignore[type-arg]
+    done = wait_run(client, start_run(client, _body(dataset_id, second_axis, **config))["id"])
+    assert done["status"] == "succeeded", done["error"]
+    return done
+
+
+def _exported_rows(client: TestClient, run_id: int) -> list[dict[str, str]]:
+    params = {"format": "csv", "part": "series"}
+    response = client.get(f"/api/runs/{run_id}/export", params=params)
+    assert response.status_code == 200, response.text
+    rows = list(csv.DictReader(io.StringIO(response.text)))
+    assert "prediction" in rows[0]  # the run's outputs: on the raster of the channels read
+    return rows
+
+
+def test_the_dataset_describes_its_whole_read(client: TestClient, dataset: dict) -> None:  # type: ignore[type-arg]
+    assert (dataset["rows"], dataset["rate_hz"]) == (T100.size, pytest.approx(10.0))
+    assert any("stored as recorded" in n for n in dataset["notes"])
+    assert dataset["masked"] == {POLE: 10, "lambda": 3}
+    preview = client.get(f"/api/datasets/{dataset['id']}/preview").json()
+    assert len(preview["time"]) == T100.size
+    assert preview["time"][0] == pytest.approx(T100[0])
+
+
+def test_a_run_on_ten_ms_channels_runs_on_the_ten_ms_raster(
+    client: TestClient,
+    dataset: dict,  # type: ignore[type-arg]
+) -> None:
+    done = _run(client, dataset["id"], STATUS_AXIS)
+    assert done["metrics"]["raster_s"] == pytest.approx(0.01)
+    assert done["metrics"]["samples"] == done["n_samples"] == T10.size  # planned: 10 ms
+    series = _exported_rows(client, done["id"])
+    assert float(series[1]["time [s]"]) - float(series[0]["time [s]"]) == pytest.approx(0.01)
+
+
+def test_a_run_needing_a_hundred_ms_channel_runs_on_the_hundred_ms_raster(
+    client: TestClient,
+    dataset: dict,  # type: ignore[type-arg]
+) -> None:
+    speed_axis = {"name": NMOT, "breakpoints": [800.0, 1300.0, 1900.0]}
+    done = _run(client, dataset["id"], speed_axis)
+    assert done["metrics"]["raster_s"] == pytest.approx(0.1)
+    assert done["metrics"]["samples"] == done["n_samples"] == T100.size
+    series = _exported_rows(client, done["id"])
+    assert float(series[1]["time [s]"]) - float(series[0]["time [s]"]) == pytest.approx(0.1)
+    assert {float(row["mode"]) for row in series} <= {0.0, 1.0, 2.0}  # held: recorded only
+
+
+def test_a_run_may_choose_its_raster(client: TestClient, dataset: dict) -> None:  # type: ignore[type-arg]
+    on_speed = _run(client, dataset["id"], STATUS_AXIS, raster=f"channel:{NMOT}")
+    assert on_speed["metrics"]["raster_s"] == pytest.approx(0.1)
+    assert on_speed["metrics"]["samples"] == on_speed["n_samples"] == T100.size
+    assert on_speed["config"]["raster"] == f"channel:{NMOT}"  # the run's record says which
+    on_rate = _run(client, dataset["id"], STATUS_AXIS, raster="50ms")
+    assert on_rate["metrics"]["raster_s"] == pytest.approx(0.05)
+    # the span of the 10 ms channels, 0.005 … 1.995 s, every 50 ms
+    assert on_rate["metrics"]["samples"] == on_rate["n_samples"] == 40
+
+
+def test_a_bad_run_raster_is_refused_naming_its_field(
+    client: TestClient,
+    dataset: dict,  # type: ignore[type-arg]
+) -> None:
+    for raster, message in (
+        ("fast please", "not understood"),
+        ("channel:nope", "raster channel 'nope' is not in dataset"),
+        (5, "must be a string"),
+    ):
+        response = client.post("/api/runs", json=_body(dataset["id"], STATUS_AXIS, raster=raster))
+        assert response.status_code == 422, response.text
+        error = response.json()["error"]
+        assert error["field"] == "config.raster"
+        assert message in error["message"]
+    dense = upload_ok(client, log_csv(200))
+    response = client.post("/api/runs", json=run_body(dense["id"], raster="10ms"))
+    assert response.status_code == 422, response.text
+    assert response.json()["error"]["field"] == "config.raster"
+    assert "stored as recorded" in response.json()["error"]["message"]
