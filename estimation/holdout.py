@@ -17,6 +17,11 @@ measured output itself (docs/tuning.md#held-out-prediction-error):
 
 The same prediction with the filter's initial map ``θ0`` (the unadapted base map) is scored
 beside it, so "the adapted map predicts better than the base map" is a number, not a claim.
+
+This is the map filters' check. Each estimator kind has its own, named in the registry
+(:data:`estimation.registry.HOLDOUT`): the LPV observer's and the EKFs' are in
+:mod:`estimation.holdout_observers`; the torque estimators have none, and
+:func:`unmeasured_input` says so in the run's metrics (docs/tuning.md#which-runs-report-what).
 """
 
 from __future__ import annotations
@@ -85,6 +90,58 @@ class HoldoutResult:
         }
 
 
+NOT_APPLICABLE = "not_applicable"
+"""Metric ``holdout:not_applicable:<reason>`` / ``nis:not_applicable:<reason>`` (value
+``None``): the check does not exist for the run's estimator, and why."""
+
+
+@dataclass(frozen=True, slots=True)
+class NotApplicable:
+    """A truth-free check that has no honest form for an estimator: ``reasons`` maps a metric
+    prefix (``holdout``, ``nis``) to a short reason slug, ``detail`` says it in words."""
+
+    reasons: dict[str, str]
+    detail: str
+
+    def metrics(self) -> dict[str, float | None]:
+        """``{prefix}:not_applicable:{reason}: None`` per prefix: stored with the run, so its
+        metrics say the check does not apply rather than leave it out."""
+        return {f"{k}:{NOT_APPLICABLE}:{v}": None for k, v in self.reasons.items()}
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"not_applicable": dict(self.reasons), "detail": self.detail}
+
+
+UNMEASURED_INPUT = NotApplicable(
+    {"holdout": "unmeasured_input", "nis": "no_innovation_covariance"},
+    "a torque estimator estimates an unknown input (the engine torque), which no sensor "
+    "measures: a frozen estimate predicts no measured quantity on the rest of the log, and "
+    "its observers carry no error covariance, so neither held-out prediction error nor NIS "
+    "exists for it",
+)
+
+
+def unmeasured_input(
+    estimator: str,
+    config: BaseModel | dict[str, Any],
+    signals: Signals,
+    *,
+    fraction: float = DEFAULT_FIT_FRACTION,
+    accept: np.ndarray | None = None,
+) -> NotApplicable:
+    """The torque estimators' truth-free check: none (:data:`UNMEASURED_INPUT`). The
+    arguments are the common signature of :data:`estimation.registry.HOLDOUT`'s functions."""
+    split_point(len(signals), fraction)
+    return UNMEASURED_INPUT
+
+
+def split_point(n: int, fraction: float) -> int:
+    """``m = round(fraction · n)``, the first held-out sample; ``fraction`` in (0, 1)."""
+    if not 0.0 < fraction < 1.0:
+        raise ConfigError(f"holdout fraction must be in (0, 1), got {fraction:g}")
+    return round(fraction * n)
+
+
 def holdout_error(
     estimator: str,
     config: BaseModel | dict[str, Any],
@@ -95,10 +152,8 @@ def holdout_error(
 ) -> HoldoutResult:
     """Fit map filter ``estimator`` on the first ``fraction`` of ``signals`` and score its
     frozen map, and the base map, on the rest (module docstring)."""
-    if not 0.0 < fraction < 1.0:
-        raise ConfigError(f"holdout fraction must be in (0, 1), got {fraction:g}")
     n = len(signals)
-    m = round(fraction * n)
+    m = split_point(n, fraction)
     mask = np.ones(n, dtype=np.bool_) if accept is None else np.asarray(accept, dtype=np.bool_)
     filt = map_filter(estimator, config)
     fit = run_innovations(filt, signals.slice(0, m), mask[:m])

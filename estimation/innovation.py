@@ -171,3 +171,63 @@ def stats_of(run: Innovations) -> InnovationStats:
     """:func:`innovation_stats` over the accepted steps of a pass."""
     ok = run.accepted
     return innovation_stats(run.e[ok], run.s[ok])
+
+
+@dataclass(frozen=True, slots=True)
+class OutputErrorStats:
+    """Normalised statistics of an output error that has no variance to normalise by (the
+    LPV observer's, docs/tuning.md#which-runs-report-what): ``mean`` and ``rms`` in the
+    output's unit, and two dimensionless ones whose value under a zero-mean white error is
+    known without a variance:
+
+    * ``mean_over_rms = mean(e)/rms(e)`` in [−1, 1]: 0 unbiased, ±1 a pure offset;
+    * ``autocorr_lag1 = Σ ẽ_k ẽ_{k−1} / Σ ẽ_k²`` (``ẽ = e − mean(e)``, over consecutive
+      samples), inside ``±autocorr_band = ±1.96/√N`` for white noise with 95 % probability
+      (Box & Jenkins, *Time Series Analysis*, §6.2: Bartlett's large-lag variance 1/N).
+    """
+
+    samples: int
+    mean: float
+    rms: float
+    mean_over_rms: float
+    autocorr_lag1: float
+    autocorr_band: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "samples": self.samples,
+            "mean": self.mean,
+            "rms": self.rms,
+            "mean_over_rms": self.mean_over_rms,
+            "autocorr_lag1": self.autocorr_lag1,
+            "autocorr_band": self.autocorr_band,
+        }
+
+
+WHITE_BAND_Z = 1.959963984540054
+"""The two-sided 95 % point of N(0, 1), for the white-noise autocorrelation band."""
+
+
+def output_error_stats(e: np.ndarray, ok: np.ndarray) -> OutputErrorStats:
+    """:class:`OutputErrorStats` of the samples of ``e`` where ``ok`` holds; the lag-1 sum
+    takes only pairs of consecutive samples that are both ``ok``."""
+    e = np.asarray(e, dtype=np.float64)
+    ok = np.asarray(ok, dtype=np.bool_) & np.isfinite(e)
+    n = int(np.count_nonzero(ok))
+    if n < 2:
+        nan = math.nan
+        return OutputErrorStats(n, nan, nan, nan, nan, nan)
+    mean = float(np.mean(e[ok]))
+    rms = float(np.sqrt(np.mean(e[ok] ** 2)))
+    d = np.where(ok, e - mean, 0.0)
+    pair = ok[1:] & ok[:-1]
+    denom = float(np.sum(d * d))
+    lag1 = float(np.sum((d[1:] * d[:-1])[pair]) / denom) if denom > 0 else math.nan
+    return OutputErrorStats(
+        samples=n,
+        mean=mean,
+        rms=rms,
+        mean_over_rms=mean / rms if rms > 0 else math.nan,
+        autocorr_lag1=lag1,
+        autocorr_band=WHITE_BAND_Z / math.sqrt(n),
+    )

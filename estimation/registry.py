@@ -135,6 +135,8 @@ class EstimatorSpec:
     ``output_units`` gives the unit of each per-sample series in ``Snapshot.outputs`` by
     name; ``""`` means "the unit of the config's output channel" (``prediction`` and
     ``residual`` of the map filters) or, for an estimator without one, no unit.
+    ``holdout`` names the truth-free check of its runs as ``"module:function"`` (``None``:
+    its kind's, :data:`HOLDOUT`; :meth:`holdout_check`).
     """
 
     name: str
@@ -148,6 +150,15 @@ class EstimatorSpec:
     output_units: Mapping[str, str]
     produces_map: bool = True
     cost: Cost = GENERIC_COST
+    holdout: str | None = None
+
+    def holdout_check(self) -> Callable[..., Any]:
+        """The truth-free check of a run (held-out prediction error, innovation statistics;
+        docs/tuning.md): ``holdout`` as ``"module:function"``, else its kind's
+        (:data:`HOLDOUT`). Called as ``f(name, config, signals, *, fraction, accept)``; it
+        returns a report whose ``metrics()`` a run stores."""
+        module, attr = (self.holdout or HOLDOUT[self.kind]).split(":")
+        return getattr(importlib.import_module(module), attr)  # type: ignore[no-any-return]
 
     def config(self, config: BaseModel | dict[str, Any]) -> BaseModel:
         """``config`` validated against the estimator's model (a :class:`ConfigError` if not)."""
@@ -220,6 +231,18 @@ def family(
         )  # fmt: skip
 
     return make
+
+
+HOLDOUT: Mapping[EstimatorKind, str] = MappingProxyType(
+    {
+        EstimatorKind.MAP_FILTER: "estimation.holdout:holdout_error",
+        EstimatorKind.MAP_OBSERVER: "estimation.holdout_observers:lpv_holdout",
+        EstimatorKind.JOINT_EKF: "estimation.holdout_observers:ekf_holdout",
+        EstimatorKind.TORQUE: "estimation.holdout:unmeasured_input",
+    }
+)
+"""The truth-free check of each kind, as ``"module:function"`` (imported on first use); a
+spec's own ``holdout`` overrides it (docs/tuning.md#which-runs-report-what)."""
 
 
 BUILTIN: tuple[str, ...] = (

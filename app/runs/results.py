@@ -35,9 +35,8 @@ from app.io.payload import Truth
 from app.runs.gates import GateResult, cell_counts, nearest_cell
 from estimation.errors import EstimationError
 from estimation.estimator import Estimator, Snapshot
-from estimation.holdout import holdout_error
 from estimation.metrics import running_ise, score_run, torque_window
-from estimation.registry import EstimatorKind, EstimatorSpec
+from estimation.registry import EstimatorSpec
 from estimation.signals import Signals
 from estimation.table import Table
 
@@ -341,15 +340,15 @@ class RunResults:
 
     def metrics(self, snap: Snapshot, run_s: float) -> dict[str, float | None]:
         """The run's final metrics: timing, counts, ``output_rmse``, coverage, on a
-        simulated dataset the scores against its truth (:func:`score_run`) and, for a map
-        filter, the truth-free ones (:meth:`holdout_metrics`)."""
+        simulated dataset the scores against its truth (:func:`score_run`) and the
+        truth-free ones (:meth:`holdout_metrics`)."""
         truth = None
         if self.truth is not None:
             truth = self.truth.scenario_data(
                 self.dataset.scenario or "", self.dataset.seed or 0, self.signals
             )
         scored = score_run(self.outputs, self.status, table=snap.table, truth=truth)
-        metrics: dict[str, float] = {
+        metrics: dict[str, float | None] = {
             "run_s": run_s,
             "samples": float(self.n),
             "accepted": float(np.count_nonzero(self.status == STATUS_ACCEPTED)),
@@ -362,23 +361,22 @@ class RunResults:
         metrics |= self.holdout_metrics()
         return {k: finite_or_none(v) for k, v in metrics.items()}
 
-    def holdout_metrics(self) -> dict[str, float]:
-        """A map filter's held-out prediction error and innovation statistics
-        (:mod:`estimation.holdout`, docs/tuning.md): the run's estimator and config refitted
-        on the first 70 % of the log, its frozen map and the base map scored on the rest
-        (``holdout:*``, in the output's unit) and the NIS of that fit (``nis:*``,
-        dimensionless). Empty for other estimators, or when the log is too short to split.
+    def holdout_metrics(self) -> dict[str, float | None]:
+        """The run's truth-free metrics, by its spec's check
+        (:meth:`~estimation.registry.EstimatorSpec.holdout_check`, docs/tuning.md): the
+        run's estimator and config refitted on the first 70 % of the log and what it froze
+        scored on the rest (``holdout:*``, in the measured output's unit), with the fit's
+        innovation statistics (``nis:*``) or, for the LPV observer, its output-error
+        statistics (``residual:*``); ``…:not_applicable:<reason>`` (``None``) where a check
+        does not exist (the torque estimators). Empty when the log is too short to split.
         """
-        if self.spec.kind != EstimatorKind.MAP_FILTER:
-            return {}
         accept = None if self.gates is None else self.gates.accept
+        check = self.spec.holdout_check()
         try:
-            result = holdout_error(
-                self.spec.name, self.run.estimator_config, self.signals, accept=accept
-            )
+            result = check(self.spec.name, self.run.estimator_config, self.signals, accept=accept)
         except EstimationError:
             return {}
-        return result.metrics()
+        return dict(result.metrics())
 
 
 def finite_or_none(value: Any) -> float | None:

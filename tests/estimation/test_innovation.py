@@ -15,6 +15,7 @@ from estimation.innovation import (
     innovation_stats,
     log_likelihood,
     map_filter,
+    output_error_stats,
     run_innovations,
     stats_of,
 )
@@ -132,3 +133,40 @@ def test_chi2_band_and_log_likelihood_match_their_definitions() -> None:
 def test_only_map_filters_have_innovations() -> None:
     with pytest.raises(ConfigError, match="not a map filter"):
         map_filter("uio", {})
+
+
+def _output_error_reference(e: np.ndarray, ok: np.ndarray) -> tuple[float, ...]:
+    """Plain loops: mean, rms, their ratio, lag-1 autocorrelation over consecutive ok pairs."""
+    vals = [float(v) for v, g in zip(e, ok, strict=True) if g]
+    mean = sum(vals) / len(vals)
+    rms = math.sqrt(sum(v * v for v in vals) / len(vals))
+    num = sum((e[k] - mean) * (e[k - 1] - mean) for k in range(1, e.size) if ok[k] and ok[k - 1])
+    den = sum((v - mean) ** 2 for v in vals)
+    return mean, rms, mean / rms, num / den, 1.959963984540054 / math.sqrt(len(vals))
+
+
+def test_output_error_stats_match_a_plain_reference_and_test_whiteness() -> None:
+    """The LPV observer's covariance-free statistics: against plain loops (masked samples
+    and pairs left out), and the white-noise band: an AR(1) error with φ = 0.8 falls
+    outside it, white noise inside."""
+    rng = np.random.default_rng(0)
+    n = 4000
+    white = 0.3 + rng.normal(0.0, 1.0, n)
+    ok = rng.uniform(size=n) > 0.1
+    got = output_error_stats(white, ok)
+    ref = _output_error_reference(white, ok)
+    assert got.samples == int(ok.sum())
+    np.testing.assert_allclose(
+        [got.mean, got.rms, got.mean_over_rms, got.autocorr_lag1, got.autocorr_band],
+        ref,
+        rtol=1e-9,
+    )
+    assert abs(got.autocorr_lag1) < got.autocorr_band
+    ar = np.empty(n)
+    ar[0] = 0.0
+    for k in range(1, n):
+        ar[k] = 0.8 * ar[k - 1] + rng.normal()
+    assert output_error_stats(ar, np.ones(n, dtype=bool)).autocorr_lag1 == pytest.approx(
+        0.8, abs=0.05
+    )
+    assert math.isnan(output_error_stats(white[:1], ok[:1]).mean)
