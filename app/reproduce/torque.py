@@ -191,9 +191,10 @@ def _ordering(
     if len(same) < len(seeds):
         lines.append(
             "Where the ordering differs: our plants are reconstructions (TQ's GT-Power model "
-            "and rig data are not available) — a mean-value model with a modest firing "
-            "ripple, speed and load noise read as variance 20, sampled at 1 kHz — so the "
-            "balance between noise amplification (UIO, dirty differentiation, κ > 0) and "
+            "and rig data are not available) — a mean-value model with the firing ripple a "
+            "test-bed shaft passes, an encoder's speed noise and a load cell's noise, "
+            "sampled at 1 kHz (estimation/plants/torque_params.py) — so the balance "
+            "between noise amplification (UIO, dirty differentiation, κ > 0) and "
             "tracking lag differs from the paper's."
         )
     if family == "adaptive" and len(same) < len(seeds):

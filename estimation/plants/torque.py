@@ -58,11 +58,10 @@ Measurements (TQ §VI)
 ---------------------
 ``N`` and ``τ_l`` plus white Gaussian noise; TQ writes ``w1 = N(0, 20)``, ``w2 = N(0, 20)``
 without saying whether 20 is the variance or the standard deviation. We read the usual
-``N(μ, σ²)`` convention — variance 20, σ = √20 ≈ 4.47 rpm and N·m. Table III confirms it:
-dirty differentiation passes w2 unfiltered where the UIO filters it, which adds ≈ 0.95·σ² to
-its error variance (TQ (30), (37)); the table's gap is 4.90² − 2.81² = 16 N·m² (σ = 20 would
-give ≈ 380). Both are one field away (``speed_noise_std_rpm``). The rig (TQ §VII) has no
-artificial noise; its defaults are bounded by Table VI (see :class:`DieselRigParams`). TQ adds
+``N(μ, σ²)`` convention — variance 20, σ = √20 ≈ 4.47 rpm and N·m; the other reading is one
+field away (``speed_noise_std_rpm``, ``load_noise_std_nm``). The rig (TQ §VII) has no
+artificial noise; its defaults are a test bed's sensors — a 1024-line encoder counted per
+1 ms sample and a 0.1 %-class torque measurement (see :class:`DieselRigParams`). TQ adds
 no noise to ``ṁ_ai``; ``air_noise_std_kg_s`` defaults to 0. TQ does not state its data rate;
 we output 1 kHz (``k = 0.01 s`` needs ``Ts ≪ k``) from a 10 kHz RK4 integration, by taking
 every ``internal_rate_hz/rate_hz``-th state (point sampling: truth identities hold per sample).

@@ -1,7 +1,11 @@
 """Parameters of the torque plants: the SI engine of TQ §VI and the diesel rig of TQ §VII.
 
-Each field says where its value comes from ("TQ" = given in the paper; otherwise a plausible
-value for the engine, bounded where possible by TQ's tables). :func:`si_coefficients` and
+Each field says where its value comes from: "TQ" = an input the paper states (its §VI/§VII
+set-up, never its result tables, Tables III–VII); otherwise a physical estimate or a typical
+data-sheet value for such an engine, test bed or sensor, with the numbers it rests on. The
+firing ripple as a test-bed shaft passes it is :func:`shaft_ripple_rel`, the dyno's encoder
+speed noise :func:`encoder_speed_noise_std_rpm`, the load cell's noise
+:func:`load_cell_noise_std_nm`. :func:`si_coefficients` and
 :func:`rig_coefficients` pack a parameter set into the coefficient vector of
 :mod:`estimation.kernels.torque_plant`; :func:`validate_params` checks what both share. The
 simulators that use them are in :mod:`estimation.plants.torque`.
@@ -19,17 +23,114 @@ from estimation.errors import ConfigError
 from estimation.kernels import torque_plant as kp
 
 __all__ = [
+    "CRANK_RIPPLE_REL",
+    "DYNO_INERTIA_SHARE",
+    "SHAFT_MODE_HZ",
     "VARIANCE_20_STD",
     "DieselRigParams",
     "SiEngineParams",
+    "encoder_speed_noise_std_rpm",
+    "load_cell_noise_std_nm",
     "require_positive",
     "rig_coefficients",
+    "shaft_ripple_rel",
     "si_coefficients",
     "validate_params",
 ]
 
 VARIANCE_20_STD: float = math.sqrt(20.0)
-"""σ of TQ §VI's ``N(0, 20)`` read as variance 20 (see module docstring)."""
+"""σ of TQ §VI's ``N(0, 20)`` (a stated input) read as variance 20, the ``N(μ, σ²)``
+convention (see :mod:`estimation.plants.torque`)."""
+
+CRANK_RIPPLE_REL: tuple[float, float] = (1.0, 0.3)
+"""Amplitudes of the firing-order and twice-firing-order harmonics of a four-cylinder's crank
+torque, relative to the mean indicated torque, at part load (order of magnitude). At 2200 rpm
+a 2 L four-cylinder's second-order (= firing-order) *inertia* torque is
+``2·m·r²·ω² ≈ 2·0.5 kg·(0.043 m)²·(230 rad/s)² ≈ 98 N·m`` (reciprocating mass 0.5 kg per
+cylinder, half-stroke 43 mm); the gas torque's firing-order harmonic at bmep ≈ 5 bar is of the
+same order (the tangential-pressure harmonic coefficients of a four-stroke cylinder). Both are
+of the order of the mean τ_i (≈ 110 N·m here), hence 1.0; the next firing harmonic is roughly
+a third of the first."""
+
+SHAFT_MODE_HZ: float = 15.0
+"""First torsional mode of the engine–coupling–dynamometer shaft [Hz]. Test-bed shafts carry
+a soft coupling that places it below the idle firing frequency (a four-cylinder at 800 rpm
+fires at 27 Hz), typically 5–20 Hz; 15 Hz is mid-range."""
+
+DYNO_INERTIA_SHARE: float = 0.5
+"""``J_d/(J_e + J_d)``: the dynamometer rotor's share of the shaft-line inertia [-] (a
+dynamometer rotor of the engine's own inertia, 0.1–0.3 kg·m²)."""
+
+
+def shaft_ripple_rel(
+    speed_rpm: float,
+    *,
+    n_cylinders: int = 4,
+    crank_rel: tuple[float, float] = CRANK_RIPPLE_REL,
+    mode_hz: float = SHAFT_MODE_HZ,
+    dyno_share: float = DYNO_INERTIA_SHARE,
+) -> tuple[float, float]:
+    """Firing ripple of the torque a test-bed shaft transmits, relative to the mean τ_i.
+
+    The crank-torque harmonic ``crank_rel[h]`` at ``f_h = (h + 1)·N·n_cyl/120`` Hz passes an
+    undamped two-inertia shaft (engine, coupling stiffness, dynamometer) as
+    ``|T_shaft/T| = dyno_share/((f_h/f_n)² − 1)`` above its mode ``f_n`` (the engine inertia
+    takes the rest). Example, the SI defaults at 2200 rpm (73 Hz):
+
+    >>> [round(r, 4) for r in shaft_ripple_rel(2200.0)]
+    [0.0218, 0.0016]
+    """
+    out = []
+    for h, rel in enumerate(crank_rel):
+        ratio = (h + 1) * speed_rpm * n_cylinders / 120.0 / mode_hz
+        if ratio <= 1.0:
+            raise ConfigError(
+                f"shaft_ripple_rel: harmonic {h + 1} at {speed_rpm:g} rpm is not above the "
+                f"shaft mode {mode_hz:g} Hz"
+            )
+        out.append(rel * dyno_share / (ratio * ratio - 1.0))
+    return out[0], out[1]
+
+
+ENCODER_LINES: int = 1024
+"""Lines of the dynamometer's speed encoder (a 1024-line incremental encoder, counted on both
+edges of both tracks: 4096 counts per revolution)."""
+
+
+def encoder_speed_noise_std_rpm(
+    *, lines: int = ENCODER_LINES, sample_period_s: float = 1e-3
+) -> float:
+    """σ [rpm] of a speed counted from a quadrature encoder over each sample period: one count
+    is ``q = 60/(4·lines·Ts)`` rpm, and a uniform quantisation error has ``σ = q/√12``.
+
+    >>> round(encoder_speed_noise_std_rpm(), 2)
+    4.23
+    """
+    return 60.0 / (4.0 * lines * sample_period_s) / math.sqrt(12.0)
+
+
+LOAD_CELL_RANGE_NM: float = 500.0
+"""Range of the rig's torque measurement [N·m]: a 500 N·m flange for a 320 N·m engine."""
+
+LOAD_CELL_ACCURACY: float = 1.0e-3
+"""Accuracy class of the torque measurement, 0.1 % of range (test-bed torque flanges and load
+cells are specified at 0.05–0.1 %)."""
+
+
+def load_cell_noise_std_nm(
+    *, range_nm: float = LOAD_CELL_RANGE_NM, accuracy: float = LOAD_CELL_ACCURACY
+) -> float:
+    """σ [N·m] of the load-torque channel: the accuracy class taken as the 1σ noise of each
+    1 kHz reading (pessimistic: the class bounds the whole error, drift included).
+
+    >>> load_cell_noise_std_nm()
+    0.5
+    """
+    return range_nm * accuracy
+
+
+_SI_RIPPLE = shaft_ripple_rel(2200.0)  # TQ §VI's first set-point
+_RIG_RIPPLE = shaft_ripple_rel(1750.0)  # middle of TQ §VII's 1000–2500 rpm sweep
 
 
 class _EngineParams:
@@ -58,13 +159,12 @@ class SiEngineParams(_EngineParams):
     not give).
     """
 
-    inertia_kg_m2: float = 0.05
-    """Crank-train inertia [kg·m²]. TQ gives no value, but Table III bounds it: the UIO passes
-    the speed noise as ``J/k·(w1 − w1f)`` (TQ (30)), SD ``≈ (J/k)·σ_N·√(1 + ρ)``,
-    ``ρ = (1 − a)/(1 + a) ≈ 0.05`` at 1 kHz; with §VI's ``σ_N = √20`` rpm the table's UIO SD
-    of 2.81 N·m needs ``J/k ≤ 0.6`` N·m/rpm, i.e. an inertia ≤ 0.057 kg·m² (an engine without a
-    heavy flywheel). A typical engine + flywheel, 0.15 kg·m², puts the UIO's noise floor alone
-    at 7.0 N·m."""
+    inertia_kg_m2: float = 0.15
+    """Crank-train inertia [kg·m²]; not in TQ. A 2 L four-cylinder's crankshaft with damper
+    and pulley (≈ 0.03–0.05), connecting-rod big ends and pistons' rotating share (≈ 0.01) and
+    a single-mass flywheel (8–10 kg, ≈ 0.08–0.12) sum to 0.1–0.2 kg·m²; 0.15 is mid-range. The
+    UIO passes the speed noise as ``J/k·(w1 − w1f)`` (TQ (30)), so with §VI's ``σ_N = √20``
+    rpm its noise floor alone is ``≈ (J/k)·σ_N ≈ 7.0`` N·m SD (docs/fidelity.md#held-out)."""
     displacement_m3: float = 2.0e-3  # V_d [m³]; TQ §VI: 2.0 L
     manifold_volume_m3: float = 2.5e-3  # V_m [m³]; ≈ V_d, manifold time constant ≈ 50 ms
     gas_constant_j_kg_k: float = 287.0  # R of air [J/(kg·K)]
@@ -85,13 +185,12 @@ class SiEngineParams(_EngineParams):
     friction_coef: tuple[float, float, float] = (8.0, 2.0e-3, 1.5e-6)
     """TQ (6) a0 [N·m], a1 [N·m/rpm], a2 [N·m/rpm²]: τ_f ≈ 20 N·m (FMEP ≈ 1.3 bar) at 2200."""
     n_cylinders: int = 4  # TQ §VI: four-cylinder
-    ripple_rel: tuple[float, float] = (0.02, 0.005)
-    """Firing-ripple amplitudes (fundamental, 2nd harmonic) relative to the mean τ_i (±2.3 N·m
-    at 2200 rpm). No k = 0.01 s estimator follows a 63–83 Hz ripple: each one's error carries
-    it almost whole (here ≈ 1.5 N·m RMS). TQ Table IV's smallest SD, 1.82 N·m ((54), κ = 0.1),
-    bounds that floor in the paper's reference torque, so real gas-torque swings (±100 %) are
-    not what TQ scored; (0.1, 0.03) alone gave a 7.5 N·m floor. ``TorqueTruth.torque_mean_nm``
-    is the ripple-free torque."""
+    ripple_rel: tuple[float, float] = _SI_RIPPLE
+    """Firing-ripple amplitudes (fundamental, 2nd harmonic) relative to the mean τ_i of the
+    torque a test-bed shaft transmits, :func:`shaft_ripple_rel` at 2200 rpm: the crank's
+    ±100 % (:data:`CRANK_RIPPLE_REL`) through a 15 Hz shaft mode, (0.022, 0.0016), i.e.
+    ±2.4 N·m at 2200 rpm. No k = 0.01 s estimator follows a 63–83 Hz ripple, so each one's
+    error carries it almost whole. ``TorqueTruth.torque_mean_nm`` is the ripple-free torque."""
     throttle_max_flow_kg_s: float = 0.12  # MAX of TQ (2) [kg/s]
     throttle_leak: float = 0.002  # TC(α) leakage at α = 0 [-]
     pri_coef: float = 9.0  # PRI(p_m) = 1 − exp(c·(p_m/p_a − 1)) [-]
@@ -134,11 +233,11 @@ class DieselRigParams(_EngineParams):
     friction_coef: tuple[float, float, float] = (12.0, 4.0e-3, 2.5e-6)
     """a0, a1, a2 of TQ (6): τ_f ≈ 30 N·m (FMEP ≈ 1.9 bar) at 2000 rpm."""
     n_cylinders: int = 4  # TQ Table V
-    ripple_rel: tuple[float, float] = (0.01, 0.003)
-    """Firing ripple of the scored torque (±1.5 N·m at 150 N·m τ_i). TQ Table VII's smallest
-    SD, 1.30 N·m ((50), κ = 0.1), bounds the part of the rig's reference torque no k = 0.01 s
-    estimator follows; (0.25, 0.08) alone gave a 35 N·m floor, which also let the dyno's
-    speed loop feed the ripple into τ_l and hand dirty differentiation a spurious edge."""
+    ripple_rel: tuple[float, float] = _RIG_RIPPLE
+    """Firing ripple of the torque the rig's shaft transmits, :func:`shaft_ripple_rel` at
+    1750 rpm (the middle of the sweep, 58 Hz): (0.035, 0.0025), ±5.3 N·m at 150 N·m τ_i. The
+    crank ripple and shaft mode are the SI engine's (a dual-mass flywheel would only lower
+    it)."""
     dyno_kp_nm_per_rpm: float = 2.0  # dyno speed PI on τ_l
     dyno_ki_nm_per_rpm_s: float = 20.0
     boost_gain_pa_per_w: float = 0.9  # boost target p_a + g·H_u·ṁ_f [Pa/W]
@@ -157,14 +256,14 @@ class DieselRigParams(_EngineParams):
     """Torque demand [N·m] within TQ §VII's 0–300 N·m: fast steps (0.2–0.3 s) and slow ramps
     (6 s), "slow and fast transient operating conditions" (TQ §VII)."""
     default_duration_s: float = 30.0  # TQ §VII: indices over 5–30 s
-    speed_noise_std_rpm: float = 1.0
-    """Test-bed speed noise [rpm]. TQ §VII adds none (its data carry "real ... measurement
-    inaccuracies"); Table VI bounds it: the UIO's SD of 2.91 N·m needs ``(J/k)·σ_N ≲ 2.8``
-    N·m, i.e. ``σ_N ≲ 1.1`` rpm with this inertia (see ``SiEngineParams.inertia_kg_m2``)."""
-    load_noise_std_nm: float = VARIANCE_20_STD
-    """Load-cell noise [N·m]. Table VI's dirty − UIO variance gap, 4.84² − 2.91² = 15 N·m², is
-    what a white load noise of variance σ² adds to dirty differentiation (≈ 0.95·σ²: TQ (37)
-    passes w2 unfiltered, (30) filters it): σ² ≈ 16, close to §VI's 20, which is kept."""
+    speed_noise_std_rpm: float = encoder_speed_noise_std_rpm()
+    """Test-bed speed noise [rpm]: TQ §VII adds none (its data carry "real ... measurement
+    inaccuracies"), so the dyno's speed channel is modelled as a 1024-line quadrature encoder
+    counted over each 1 ms sample, :func:`encoder_speed_noise_std_rpm`: one count is 14.6 rpm,
+    σ = 4.23 rpm (white, uniform-quantisation equivalent)."""
+    load_noise_std_nm: float = load_cell_noise_std_nm()
+    """Load-torque noise [N·m]: a 500 N·m torque measurement of accuracy class 0.1 %,
+    :func:`load_cell_noise_std_nm`, σ = 0.5 N·m."""
     air_noise_std_kg_s: float = 0.0
 
 

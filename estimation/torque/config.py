@@ -26,10 +26,11 @@ from estimation.torque.channels import AIR_CHANNEL, LOAD_CHANNEL, SPEED_CHANNEL
 AIR_UNIT_SCALE: dict[str, float] = {"kg/s": 1.0, "g/s": 1.0e3, "kg/h": 3.6e3}
 """Factor from the measured ṁ_ai [kg/s] to the unit it enters the regressor Φ in."""
 
-DEFAULT_J_NM_S_PER_RPM: float = 0.05 * (2.0 * math.pi / 60.0)
-"""Scaled crankshaft inertia ``inertia·2π/60`` [N·m·s/rpm] of a 2 L engine without a heavy
-flywheel, 0.05 kg·m² (the bound TQ Table III implies, docs/algorithms.md §5); the SI
-scenario's plant has this value (``tests/estimation/test_mismatch.py``)."""
+DEFAULT_J_NM_S_PER_RPM: float = 0.15 * (2.0 * math.pi / 60.0)
+"""Scaled crankshaft inertia ``inertia·2π/60`` [N·m·s/rpm] of a 2 L four-cylinder with a
+single-mass flywheel, 0.15 kg·m² (crankshaft, damper and rods ≈ 0.04–0.06 plus flywheel
+≈ 0.08–0.12: 0.1–0.2 kg·m²; docs/algorithms.md §5); the SI scenario's plant has this value
+(``tests/estimation/test_mismatch.py``)."""
 
 
 class TorqueEstimatorConfig(BaseModel):

@@ -422,8 +422,10 @@ def test_specs_errors_and_state_checks() -> None:
 
 # --- TQ §VI/§VII orderings (Tables III, IV, VI, VII) on our simulators ---------------------
 # Claims are asserted on the held-out seeds 100–109 under mismatch="nominal" (the estimators'
-# J drawn ±10 % around the plant's; docs/fidelity.md): nothing was tuned on them. Where a
-# table's ordering does not hold, the test asserts the ordering that does, with the figures.
+# J drawn ±10 % around the plant's; docs/fidelity.md): nothing was tuned on them. The plants'
+# inertia, firing ripple and rig sensor noise come from physics and data-sheet values, not
+# from TQ's tables (estimation/plants/torque_params.py). Where a table's ordering does not
+# hold, the test asserts the ordering that does, with the figures.
 SEEDS = list(range(100, 110))
 SCENARIOS = ["torque-si", "torque-rig"]
 ADAPTIVE = [f"{law}/{kappa}" for law in ("adaptive-const", "adaptive-tv") for kappa in (0.0, 0.1)]
@@ -455,27 +457,58 @@ def scores(scenario: str, seed: int) -> dict[str, dict[str, float]]:
     return {key: torque_metrics(t, e, window_s=(5, 30)) for key, e in err.items()}
 
 
-@pytest.mark.parametrize("seed", SEEDS)
-@pytest.mark.parametrize("scenario", SCENARIOS)
-def test_uio_beats_sliding_mode_and_dirty_differentiation(scenario: str, seed: int) -> None:
-    """TQ Tables III (§VI) and VI (§VII): the UIO has the lowest ISE and SD of the three."""
-    m = scores(scenario, seed)
-    for other in ("smo", "dirty"):
-        assert m["uio"]["ise"] < m[other]["ise"], (other, m)
-        assert m["uio"]["sd"] < m[other]["sd"], (other, m)
-
-
 def seed_mean(scenario: str, key: str, metric: str) -> float:
     return float(np.mean([scores(scenario, seed)[key][metric] for seed in SEEDS]))
 
 
 @pytest.mark.parametrize("seed", SEEDS)
-def test_time_varying_gain_with_kappa_is_best_adaptive_variant_on_the_rig(seed: int) -> None:
-    """The issue's target from TQ Tables IV/VII: (54) with κ = 0.1 has the lowest ISE and SD.
-    (TQ Table VII itself ranks (50) with κ = 0.1 first on the rig; see below.) On torque-rig,
-    seeds 100–109, nominal: ISE 260–359, SD 3.20–3.75 against ≥ 1015 and ≥ 6.30 for the
-    others."""
+@pytest.mark.parametrize("scenario", SCENARIOS)
+def test_uio_beats_sliding_mode(scenario: str, seed: int) -> None:
+    """TQ Tables III (§VI) and VI (§VII): the UIO has lower ISE and SD than the sliding-mode
+    estimator. Nominal, seeds 100–109: torque-si ISE 1146–1579 against 2521–2720, torque-rig
+    3342–4588 against 12653–13199."""
+    m = scores(scenario, seed)
+    assert m["uio"]["ise"] < m["smo"]["ise"], m
+    assert m["uio"]["sd"] < m["smo"]["sd"], m
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_uio_beats_dirty_differentiation_on_si(seed: int) -> None:
+    """TQ Table III: the UIO has lower ISE and SD than dirty differentiation, which passes the
+    §VI load noise N(0, 20) unfiltered (TQ (37)). Nominal, seeds 100–109: ISE 1146–1579
+    against 1627–2047, SD 6.77–7.95 against 8.07–9.05."""
+    m = scores("torque-si", seed)
+    assert m["uio"]["ise"] < m["dirty"]["ise"], m
+    assert m["uio"]["sd"] < m["dirty"]["sd"], m
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_dirty_differentiation_edges_the_uio_on_the_rig(seed: int) -> None:
+    """A miss of TQ Table VI (UIO lowest ISE and SD on the rig): on torque-rig dirty
+    differentiation is marginally better on every held-out seed (nominal, seeds 100–109: UIO
+    ISE 0.6–1.7 % and SD 0.3–0.8 % above dirty's, ISE 3342–4588 against 3287–4556).
+
+    Cause: the two differ only in τ_l against its filtered τ_lf (TQ (14), (24)). The rig's
+    0.1 %-class load measurement has σ = 0.5 N·m, so filtering it gains little, while τ_lf
+    lags the dyno's fast load swings by k = 0.01 s. Evidence on seed 100 (the rig plant with
+    the nominal draw's J, docs/fidelity.md#held-out): without noise dirty differentiation wins
+    too (ISE 553 against 607), and with §VI's load noise σ = √20 the UIO wins (3574 against
+    3984)."""
     m = scores("torque-rig", seed)
+    assert 1.0 < m["uio"]["ise"] / m["dirty"]["ise"] < 1.03, m
+    assert 1.0 < m["uio"]["sd"] / m["dirty"]["sd"] < 1.015, m
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+@pytest.mark.parametrize("scenario", SCENARIOS)
+def test_time_varying_gain_with_kappa_is_best_adaptive_variant(scenario: str, seed: int) -> None:
+    """TQ Table IV (§VI) under the frozen Γ = 10·I of (54) (chosen on tuning seeds 0–4,
+    app/reproduce/sensitivity.py, docs/estimators.md#dev-tq-gamma-54): (54) with κ = 0.1 has
+    the lowest ISE and SD of the four adaptive variants. Nominal, seeds 100–109: torque-si ISE
+    149–199 against ≥ 172 ((54) κ = 0, which drifts to 2534 on seed 103) and 213–432 for (50),
+    SD 2.45–2.82 against ≥ 2.62; torque-rig ISE 1413–1532 against ≥ 2311, SD 7.47–7.77
+    against ≥ 9.61. (TQ Table VII itself ranks (50) with κ = 0.1 first on the rig; below.)"""
+    m = scores(scenario, seed)
     best = "adaptive-tv/0.1"
     for key in ADAPTIVE:
         if key != best:
@@ -484,38 +517,10 @@ def test_time_varying_gain_with_kappa_is_best_adaptive_variant_on_the_rig(seed: 
 
 
 @pytest.mark.parametrize("seed", SEEDS)
-def test_time_varying_gain_with_kappa_beats_the_constant_gain_on_si(seed: int) -> None:
-    """TQ Table IV on torque-si under the frozen Γ = 10·I of (54) (chosen on tuning seeds 0–4,
-    app/reproduce/sensitivity.py, docs/estimators.md#dev-tq-gamma-54): (54) with κ = 0.1 has
-    lower ISE and SD than (50) with κ = 0 and κ = 0.1 on every held-out seed (nominal, seeds
-    100–109: ISE 107–120 against 119–127, SD 2.06–2.19 against 2.18–2.25)."""
-    m = scores("torque-si", seed)
-    for other in ("adaptive-const/0.0", "adaptive-const/0.1"):
-        for metric in ("ise", "sd"):
-            assert m["adaptive-tv/0.1"][metric] < m[other][metric], (other, metric, m)
-
-
-def test_time_varying_gain_with_kappa_is_best_on_si_on_average() -> None:
-    """TQ Table IV's ordering on torque-si, on the held-out seed means: (54) with κ = 0.1 has
-    the lowest seed-mean ISE and SD of the four variants (nominal, seeds 100–109: ISE 111.7
-    against 122.2, 123.2, 388; SD 2.11 against 2.21, 2.22, 3.66). Per seed it is lowest on 9
-    of 10; on seed 108 (54) with κ = 0 is marginally lower (docs/estimators.md#dev-tq-gamma-54)."""
-    for metric in ("ise", "sd"):
-        means = {key: seed_mean("torque-si", key, metric) for key in ADAPTIVE}
-        assert min(means, key=means.__getitem__) == "adaptive-tv/0.1", (metric, means)
-    best = [
-        seed
-        for seed in SEEDS
-        if min(ADAPTIVE, key=lambda key: scores("torque-si", seed)[key]["ise"]) == "adaptive-tv/0.1"
-    ]
-    assert len(best) >= 9, best
-
-
-@pytest.mark.parametrize("seed", SEEDS)
 def test_constant_gain_with_kappa_is_not_first_on_the_rig(seed: int) -> None:
     """TQ Table VII ranks (50) with κ = 0.1 first on the rig; here (54) with κ = 0.1 beats it
     on ISE and SD on every held-out seed (docs/estimators.md#dev-tq-rig-ranking; nominal,
-    seeds 100–109: ISE 1201–1607 against 260–359)."""
+    seeds 100–109: ISE 2311–2938 against 1413–1532, SD 9.61–10.8 against 7.47–7.77)."""
     m = scores("torque-rig", seed)
     for metric in ("ise", "sd"):
         assert m["adaptive-tv/0.1"][metric] < m["adaptive-const/0.1"][metric], (metric, m)
@@ -533,49 +538,65 @@ def test_constant_gain_with_kappa_is_not_first_on_the_rig(seed: int) -> None:
 def test_kappa_reduces_the_peak_error(law: str, scenario: str, seed: int) -> None:
     """TQ §VI: W2 "reduces the peak errors at the transient points" (Tables IV, VII: MAE
     19.2 → 14.8 and 19.7 → 12.7 in simulation, 15.4 → 9.4 and 17.3 → 9.7 on the rig). Nominal,
-    seeds 100–109: (50) on torque-si 19.7–21.0 → 14.1–16.7, on torque-rig 83.6–84.3 →
-    47.6–50.1; (54) on torque-rig 64.8–66.4 → 33.1–35.9. (54) on torque-si: below."""
+    seeds 100–109: (50) on torque-si 26.9–28.4 → 21.6–27.2, on torque-rig 86.3–87.3 →
+    56.2–62.1; (54) on torque-rig 104.5–107.9 → 62.4–65.6. (54) on torque-si: below."""
     m = scores(scenario, seed)
     assert m[f"{law}/0.1"]["mae"] < m[f"{law}/0.0"]["mae"], m
 
 
-def test_kappa_reduces_the_peak_error_of_the_time_varying_law_on_si_on_average() -> None:
-    """TQ §VI: κ = 0.1 lowers the MAE of (54) in simulation (Table IV 19.65 → 12.74). Under
-    the frozen Γ = 10·I it lowers the seed-mean MAE on torque-si (nominal, seeds 100–109:
-    61.4 → 36.2 N·m; per seed 17–117 → 14–58; docs/estimators.md#dev-tq-gamma-54)."""
-    assert seed_mean("torque-si", "adaptive-tv/0.1", "mae") < seed_mean(
+def test_kappa_shortens_but_sharpens_the_transient_error_of_the_time_varying_law_on_si() -> None:
+    """A miss of TQ Table IV (κ = 0.1 lowers the MAE of (54), 19.65 → 12.74): on torque-si
+    under the frozen Γ = 10·I it raises the seed-mean MAE (nominal, seeds 100–109: 71.0 →
+    86.7 N·m; lower on 4 of 10 seeds). The peak with κ = 0.1 is a spike within 7 ms of the
+    set-point steps at 12 and 14 s, where W2 = Φ_f(Φ_fΘ̂ − y) (TQ (47)) acts on the
+    instantaneous error at full gain; the error stays above 20 N·m for 5–12 ms per run against
+    17–287 ms without κ, on every seed. Both are asserted."""
+    assert seed_mean("torque-si", "adaptive-tv/0.1", "mae") > seed_mean(
         "torque-si", "adaptive-tv/0.0", "mae"
     )
+    for seed in SEEDS:
+        t, err = errors("torque-si", seed)
+        inside = (t >= 5.0) & (t <= 30.0)
+        above = {
+            key: np.count_nonzero(np.abs(err[key][inside]) > 20.0)
+            for key in ("adaptive-tv/0.0", "adaptive-tv/0.1")
+        }
+        assert above["adaptive-tv/0.1"] < above["adaptive-tv/0.0"], (seed, above)
 
 
 @pytest.mark.parametrize("seed", SEEDS)
 @pytest.mark.parametrize("law", ["adaptive-const", "adaptive-tv"])
 def test_kappa_reduces_ise_and_sd_on_the_rig(law: str, seed: int) -> None:
     """TQ Table VII: ISE and SD fall when κ goes from 0 to 0.1, for both laws. Nominal, seeds
-    100–109: (50) ISE 3924–4734 → 1201–1607, SD 12.5–13.8 → 6.93–8.01; (54) ISE 1015–1147 →
-    260–359, SD 6.30–6.68 → 3.20–3.75."""
+    100–109: (50) ISE 4499–5318 → 2311–2938, SD 13.4–14.6 → 9.61–10.8; (54) ISE 5090–5247 →
+    1413–1532, SD 14.1–14.3 → 7.47–7.77."""
     m = scores("torque-rig", seed)
     for metric in ("ise", "sd"):
         assert m[f"{law}/0.1"][metric] < m[f"{law}/0.0"][metric], (metric, m)
 
 
-def test_kappa_reduces_the_seed_mean_ise_and_sd_of_the_time_varying_law_on_si() -> None:
+@pytest.mark.parametrize("seed", SEEDS)
+def test_kappa_reduces_ise_and_sd_of_the_time_varying_law_on_si(seed: int) -> None:
     """TQ Table IV: κ = 0.1 lowers ISE and SD of (54) (1.72e5 → 7.49e4, 2.76 → 1.82). Under
-    the frozen Γ = 10·I it does on the torque-si seed means (nominal, seeds 100–109: ISE 388
-    → 111.7, SD 3.66 → 2.11; without κ the law drifts on most seeds, ISE 105–983)."""
+    the frozen Γ = 10·I it does on every torque-si seed (nominal, seeds 100–109: ISE 172–2534
+    → 149–199, SD 2.62–10.1 → 2.45–2.82; without κ the law drifts on most seeds)."""
+    m = scores("torque-si", seed)
     for metric in ("ise", "sd"):
-        with_kappa = seed_mean("torque-si", "adaptive-tv/0.1", metric)
-        assert with_kappa < seed_mean("torque-si", "adaptive-tv/0.0", metric), metric
+        assert m["adaptive-tv/0.1"][metric] < m["adaptive-tv/0.0"][metric], (metric, m)
 
 
-def test_kappa_leaves_the_seed_mean_ise_and_sd_of_the_constant_gain_on_si_unchanged() -> None:
-    """TQ Table IV's κ effect on (50) in simulation (κ = 0.1 lowers ISE and SD) is not there
-    on torque-si: the seed means with and without κ = 0.1 are within 3 % of each other
-    (nominal, seeds 100–109: ISE 123.2 against 122.2; docs/estimators.md#dev-tq-kappa-50-si)."""
+@pytest.mark.parametrize("seed", SEEDS)
+def test_kappa_raises_ise_and_sd_of_the_constant_gain_on_si(seed: int) -> None:
+    """A miss of TQ Table IV (κ = 0.1 lowers ISE and SD of (50), 1.55e5 → 1.33e5, 2.62 →
+    2.43): on torque-si it raises them on every held-out seed (nominal, seeds 100–109: ISE
+    213–219 → 357–432, SD 2.92–2.96 → 3.78–4.16), while it lowers the MAE (above).
+    The likely cause: (50) with ṁ_ai in kg/s adapts θ1 alone (estimation/torque/config.py),
+    at the rate Γ1·κ·Φ_f1² ≈ 5·10⁴ s⁻¹ on κW2, so θ̂1 follows the instantaneous
+    y = J(N − N_f)/k + τ_lf, whose speed-noise term (J/k)·w1 is ≈ 7 N·m SD with a 0.15 kg·m²
+    crank train (docs/estimators.md#dev-tq-kappa-50-si)."""
+    m = scores("torque-si", seed)
     for metric in ("ise", "sd"):
-        with_kappa = seed_mean("torque-si", "adaptive-const/0.1", metric)
-        without = seed_mean("torque-si", "adaptive-const/0.0", metric)
-        assert abs(with_kappa / without - 1.0) < 0.03, (metric, with_kappa, without)
+        assert m["adaptive-const/0.1"][metric] > m["adaptive-const/0.0"][metric], (metric, m)
 
 
 def test_paper_diagonal_gain_destabilises_the_time_varying_law() -> None:
