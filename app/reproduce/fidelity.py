@@ -28,6 +28,7 @@ configured: :meth:`estimation.scenarios.Scenario.build`) and returns ``{key: fig
 from __future__ import annotations
 
 import json
+from contextvars import ContextVar
 from pathlib import Path
 from typing import Any
 
@@ -36,10 +37,13 @@ import numpy as np
 from estimation.kernels.sensor import sensor_kernel
 from estimation.metrics import map_metrics, torque_metrics
 from estimation.registry import get_spec
-from estimation.scenarios import ScenarioData, get_scenario
+from estimation.scenarios import Scenario, ScenarioData, get_scenario
 from estimation.signals import delay_samples
 
 SEGMENTS_S = {"maf-whtc": 600.0, "maf-ftp75": 505.0}
+DURATION_S: ContextVar[float | None] = ContextVar("fidelity_duration_s", default=None)
+"""Cut every scenario to its first so many seconds (``None``: whole records, the default;
+``mapwise reproduce --robustness-duration``). The papers' segments are cut with it."""
 TORQUE = ("uio", "smo", "dirty", "adaptive-const/0.0", "adaptive-const/0.1", "adaptive-tv/0.0")
 TORQUE += ("adaptive-tv/0.1",)
 
@@ -59,6 +63,26 @@ def head(data: ScenarioData, seconds: float) -> ScenarioData:
     )
 
 
+def _build(
+    sc: Scenario,
+    level: str,
+    seed: int,
+    noise_scale: float = 1.0,
+    *,
+    averaging: int | None = None,
+) -> ScenarioData:
+    """One realisation at ``level`` and ``noise_scale``, cut to :data:`DURATION_S` (at most
+    the scenario's own duration)."""
+    cut = DURATION_S.get()
+    return sc.build(
+        seed=seed,
+        duration_s=None if cut is None else min(cut, sc.duration_s),
+        mismatch=level,  # type: ignore[arg-type]
+        averaging=averaging,
+        noise_scale=noise_scale,
+    )
+
+
 def lpv_mre(data: ScenarioData, config: dict[str, Any]) -> float:
     snap = get_spec("lpv").build(config).fit(data.signals)
     assert data.true_map is not None
@@ -71,14 +95,14 @@ def lpv(level: str, seed: int, noise_scale: float = 1.0) -> dict[str, float]:
     out = {}
     for name, seconds in SEGMENTS_S.items():
         sc = get_scenario(name)
-        data = sc.build(seed=seed, mismatch=level, noise_scale=noise_scale)  # type: ignore[arg-type]
+        data = _build(sc, level, seed, noise_scale)
         config = sc.default_config("lpv", data=data)
         out[f"lpv/{name}/full"] = lpv_mre(data, config)
         out[f"lpv/{name}/segment"] = lpv_mre(head(data, seconds), config)
         if level == "nominal" and noise_scale == 1.0:
             drawn = config | {"model": config["model"] | data.metadata["identification"]["drawn"]}
             out[f"lpv/{name}/segment/drawn"] = lpv_mre(head(data, seconds), drawn)
-            single = sc.build(seed=seed, mismatch=level, averaging=1)  # type: ignore[arg-type]
+            single = _build(sc, level, seed, averaging=1)
             config1 = sc.default_config("lpv", data=single)
             out[f"lpv/{name}/full/single"] = lpv_mre(single, config1)
             out[f"lpv/{name}/segment/single"] = lpv_mre(head(single, seconds), config1)
@@ -97,7 +121,7 @@ def lpv_literal(level: str, seed: int, noise_scale: float = 1.0) -> dict[str, fl
         return out
     for name, seconds in SEGMENTS_S.items():
         sc = get_scenario(name)
-        data = sc.build(seed=seed, mismatch=level, noise_scale=noise_scale)  # type: ignore[arg-type]
+        data = _build(sc, level, seed, noise_scale)
         config = sc.default_config("lpv", data=data) | LPV_LITERAL
         with np.errstate(all="ignore"):
             out[f"lpv/{name}/full/literal"] = lpv_mre(data, config)
@@ -112,7 +136,7 @@ def _ekf(
     level: str, seed: int, noise_scale: float, variants: tuple[str, ...], limit: str | None
 ) -> dict[str, float]:
     sc = get_scenario("maf-1d-whtc")
-    data = sc.build(seed=seed, mismatch=level, noise_scale=noise_scale)  # type: ignore[arg-type]
+    data = _build(sc, level, seed, noise_scale)
     truth = data.scored_series["w_c_kg_s"]
     out = {}
     for name in variants:
@@ -141,7 +165,7 @@ def nox(level: str, seed: int, noise_scale: float = 1.0) -> dict[str, float]:
     from estimation.plants.nox import nox_base_map
 
     sc = get_scenario("nox-nedc")
-    data = sc.build(seed=seed, mismatch=level, noise_scale=noise_scale)  # type: ignore[arg-type]
+    data = _build(sc, level, seed, noise_scale)
     n = len(data.signals)
     split = int(0.7 * n)
     inputs = data.signals.stack(list(data.map_inputs))
@@ -167,7 +191,7 @@ def torque(level: str, seed: int, noise_scale: float = 1.0) -> dict[str, float]:
     out = {}
     for name in ("torque-si", "torque-rig"):
         sc = get_scenario(name)
-        data = sc.build(seed=seed, mismatch=level, noise_scale=noise_scale)  # type: ignore[arg-type]
+        data = _build(sc, level, seed, noise_scale)
         truth = data.scored_series["torque_nm"]
         t = data.signals.time
         for key in TORQUE:

@@ -13,7 +13,8 @@ TQ states no Γ for the time-varying law (54) (its Theorem 4 needs Γ scalar; th
 
 The result is frozen as the default of ``AdaptiveTvConfig.gamma``; the report section re-runs
 the sweep so the table is live, and also runs the paper's ``diag(0.1, 100)`` to show it
-diverges for (54).
+diverges for (54). The section also runs the same kind of rule for γ of the LPV observer
+(:mod:`app.reproduce.lpv_gamma`); ``mapwise reproduce`` prints both tables.
 """
 
 from __future__ import annotations
@@ -25,7 +26,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from app.cli.run import execute_scenario
+from app.reproduce import lpv_gamma
 from app.reproduce.report import Section, Table, Text, num
+from app.reproduce.seeds import TUNING_SEEDS
 from estimation.scenarios import get_scenario
 from estimation.torque.config import AdaptiveTvConfig
 
@@ -34,7 +37,6 @@ ESTIMATOR = "adaptive-tv"
 METRIC = "ise"
 MISMATCH_LEVEL = "nominal"
 GRID: tuple[float, ...] = (1.0, 3.0, 10.0, 30.0, 100.0)
-TUNING_SEEDS: tuple[int, ...] = (0, 1, 2, 3, 4)
 PAPER_GAMMA_50: tuple[float, float] = (0.1, 100.0)
 """TQ §VI's Γ, stated for (50); run through (54) it diverges."""
 
@@ -132,10 +134,12 @@ def table(result: GammaSweep) -> Table:
 
 
 def build(seeds: Sequence[int]) -> Section:
-    """The report section. ``seeds`` (the report's) are not used: the rule fixes the tuning
-    seeds, so the section is the same for every report."""
+    """The report section: the Γ sweep of TQ (54) and the γ sweep of the LPV observer
+    (:mod:`app.reproduce.lpv_gamma`). ``seeds`` (the report's) are not used: the rules fix
+    the tuning seeds, so the section is the same for every report."""
     del seeds
     result = sweep()
+    lpv = lpv_gamma.sweep()
     default = AdaptiveTvConfig().gamma
     frozen = default == (result.chosen, result.chosen)
     paper = paper_gamma_run(TUNING_SEEDS[0])
@@ -146,11 +150,12 @@ def build(seeds: Sequence[int]) -> Section:
     )
     section = Section(
         key="sensitivity",
-        title="Tuning rule — Γ of TQ (54) on tuning seeds 0–4",
+        title="Tuning rules — Γ of TQ (54) and γ of the LPV observer on tuning seeds 0–4",
         verdict=(
             f"selected Γ = {result.chosen:g}·I (lowest seed-mean ISE); "
             + ("it is the frozen default" if frozen else f"the default is {default}, NOT it")
-            + f"; the paper's Γ = diag(0.1, 100) diverges for (54) (seed {paper.seed})"
+            + f"; the paper's Γ = diag(0.1, 100) diverges for (54) (seed {paper.seed}); "
+            + lpv_gamma.verdict(lpv)
         ),
     )
     section.blocks += [
@@ -168,5 +173,16 @@ def build(seeds: Sequence[int]) -> Section:
             f"{where}; ΓK(P + κΦ_fᵀΦ_f) is not symmetric for a non-scalar Γ and has an "
             "unstable eigenvalue on part of the samples (TQ Theorem 4 needs Γ scalar)."
         ),
+        *lpv_gamma.blocks(lpv),
     ]
+    section.data = {
+        "tq_gamma": {
+            "grid": list(result.grid),
+            "seeds": list(result.seeds),
+            "chosen": result.chosen,
+            "default": list(default),
+            "ise": {f"{g:g}": list(result.ise[g]) for g in result.grid},
+        },
+        "lpv_gamma": lpv.as_data(),
+    }
     return section
