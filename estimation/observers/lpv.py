@@ -100,7 +100,10 @@ class LpvConfig(BaseModel):
     gamma: float = Field(
         10.0,
         gt=0,
-        description="Initial adaptation gain γ [1/s per unit ψ²]: Γ = γI when constant.",
+        description="Initial adaptation gain γ [1/s per unit ψ²]: Γ = γI when constant. The "
+        "default 10 is the declared rule's choice for the normalised gain (grid 1–1000, tuning "
+        "seeds 0–4, nominal, lowest MRE over the papers' segments: docs/tuning.md"
+        "#declared-rules).",
     )
     gain_structure: Literal["decoupled", "full"] = Field(
         "decoupled", description="LMI gain structure (estimation.observers.lmi)."
@@ -139,6 +142,13 @@ class LpvConfig(BaseModel):
         True,
         description="Freeze θ where ρ1 = 0: the compressor model then predicts no flow, so "
         "the whole MAF reading would be taken for sensor error.",
+    )
+    fill: Literal["none", "quadratic", "smooth"] = Field(
+        "none",
+        description="Fill of the finished map's unvisited cells (ψ weight < 1): 'quadratic' "
+        "is LPV (37)'s surface (2-D maps, >= 6 visited cells), 'smooth' the smoothest "
+        "continuation of the visited part (estimation/observers/lpv_fill.py); 'none' keeps "
+        "their initial value. The state is not filled.",
     )
     p_im: str = Field("p_im_pa", description="Intake manifold pressure [Pa].")
     p_em: str | None = Field(
@@ -396,11 +406,35 @@ class LpvObserver(ChunkedEstimator[LpvState, LpvPrepared]):
         return prepared.time_s
 
     def report(self, state: LpvState, prepared: LpvPrepared, chunk: Chunk) -> dict[str, Any]:
+        table = Table(self.grid.axes, state.theta.reshape(self.grid.shape))
+        if chunk.sample >= prepared.time_s.size:
+            table = self.filled(table, state)
         return {
-            "table": Table(self.grid.axes, state.theta.reshape(self.grid.shape)),
+            "table": table,
             "outputs": chunk.outputs,
             "rejected": {"mask": int(np.count_nonzero(~prepared.accept[: chunk.sample]))},
         }
+
+    def filled(self, table: Table, state: LpvState) -> Table:
+        """The finished map with its unvisited cells filled as ``config.fill`` says (LPV (37)
+        or the smooth fill of :mod:`estimation.observers.lpv_fill`). Only the reported map is
+        filled, once, at the end of the log: a resumed or continued run adapts the raw θ̂.
+        A map the fill cannot take (too few visited cells, or a quadratic fill of a map that
+        is not 2-D) is reported unfilled, as every cell a fill would have to invent is
+        unvisited anyway."""
+        if self.config.fill == "none":
+            return table
+        from estimation.observers.lpv_fill import fill_quadratic, fill_smooth, visited_cells
+
+        visited = visited_cells(state.weight_sum)
+        if visited.all():
+            return table
+        try:
+            if self.config.fill == "quadratic":
+                return fill_quadratic(table, visited)[0]
+            return fill_smooth(table, visited)[0]
+        except (ConfigError, ShapeError):
+            return table
 
 
 def lpv_run(

@@ -401,3 +401,31 @@ def test_fills_complete_the_observed_map():
     for filled in (quad, smooth):
         assert np.all(np.isfinite(filled.values))
         assert rms((filled.values - true)[~visited]) < 0.8 * zero_fill
+
+
+@pytest.mark.parametrize("fill", ["quadratic", "smooth"])
+def test_fill_option_fills_only_the_finished_map(fill):
+    """``config.fill``: the last snapshot's map is the fill of lpv_fill (unvisited cells
+    changed, LPV (37) keeps the visited ones); earlier snapshots and the state stay raw."""
+    data = _scenario("maf-whtc", 0)
+    config = get_scenario("maf-whtc").default_config("lpv")
+    raw = LPV_SPECS[0].build(config).fit(data.signals)
+    snaps = list(LPV_SPECS[0].build({**config, "fill": fill}).run(data.signals, every=6000))
+    assert len(snaps) > 1
+    for early in snaps[:-1]:
+        assert_array_equal(early.table.values, early.state.theta.reshape(early.table.shape))
+    last = snaps[-1]
+    assert_array_equal(last.state.theta, raw.state.theta)
+    visited = visited_cells(raw.state).reshape(raw.table.shape)
+    reference = (fill_quadratic if fill == "quadratic" else fill_smooth)(raw.table, visited)[0]
+    assert_allclose(last.table.values, reference.values, rtol=0, atol=1e-12)
+    assert np.any(last.table.values[~visited] != raw.table.values[~visited])
+
+
+def test_fill_that_cannot_apply_leaves_the_map_raw():
+    """A quadratic fill needs >= 6 visited cells; with fewer the map is reported unfilled."""
+    sig, _ = _signals(n=50)
+    raw = LpvObserver(LpvConfig()).fit(sig)
+    assert visited_cells(raw.state).sum() < 6
+    filled = LpvObserver(LpvConfig(fill="quadratic")).fit(sig)
+    assert_array_equal(filled.table.values, raw.table.values)
