@@ -68,6 +68,7 @@ SettingsDep = Annotated[Settings, Depends(get_settings)]
 ROUTE_SCOPES: dict[str, str] = {
     "POST /datasets": "run",
     "POST /datasets/simulate": "run",
+    "POST /datasets/simulate/stream": "run",
     "DELETE /datasets/{dataset_id}": "admin",
     "POST /runs": "run",
     "POST /runs/{run_id}/cancel": "run",

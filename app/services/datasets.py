@@ -39,6 +39,7 @@ from app.store import (
 )
 from estimation.errors import EstimationError
 from estimation.mismatch import MismatchLevel
+from estimation.progress import Progress, reporting
 from estimation.scenarios import get_scenario, scenarios
 from estimation.signals import Signals
 
@@ -170,15 +171,17 @@ class DatasetService:
         name: str | None,
         duration_s: float | None,
         mismatch: MismatchLevel = "nominal",
+        progress: Progress | None = None,
     ) -> Dataset:
-        if scenario not in scenarios():
-            raise InvalidRequestError(
-                f"unknown scenario {scenario!r}; choose one of {sorted(scenarios())}",
-                field="scenario",
-            )
+        """Simulate ``scenario`` and store it with its truth. ``progress``, when given, is
+        what the build reports its integrator's steps into (:mod:`estimation.progress`)."""
+        self.check_simulation(scenario, duration_s)
         given = _dataset_name(name, None, f"{scenario} (seed {seed})")
         try:
-            data = get_scenario(scenario).build(seed=seed, duration_s=duration_s, mismatch=mismatch)
+            with reporting(progress or Progress()):
+                data = get_scenario(scenario).build(
+                    seed=seed, duration_s=duration_s, mismatch=mismatch
+                )
         except EstimationError as exc:  # out of range, or too short for two samples
             raise InvalidRequestError(str(exc), field="duration_s") from exc
         signals = data.signals
@@ -199,6 +202,20 @@ class DatasetService:
                 truth=truth,
             ),
         )
+
+    @staticmethod
+    def check_simulation(scenario: str, duration_s: float | None) -> None:
+        """The 422 a simulation of ``scenario`` for ``duration_s`` would end in, raised before
+        anything runs: an unknown scenario, or a duration outside its record."""
+        if scenario not in scenarios():
+            raise InvalidRequestError(
+                f"unknown scenario {scenario!r}; choose one of {sorted(scenarios())}",
+                field="scenario",
+            )
+        try:
+            get_scenario(scenario).check_duration(duration_s)
+        except EstimationError as exc:
+            raise InvalidRequestError(str(exc), field="duration_s") from exc
 
     def get(self, dataset_id: int) -> Dataset:
         with self.db.read() as s:

@@ -656,7 +656,7 @@ def _interp_inputs(t: float, time_in: np.ndarray, vals: np.ndarray, j: int, out:
     return j
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def airpath_simulate_kernel(
     x: np.ndarray,
     mem: np.ndarray,
@@ -670,6 +670,7 @@ def airpath_simulate_kernel(
     ctl: np.ndarray,
     out: np.ndarray,
     diag: np.ndarray,
+    progress: np.ndarray,
 ) -> None:
     """Integrate the plant over the whole horizon and record ``out[k, :]`` at ``t_out[k]``.
 
@@ -688,6 +689,9 @@ def airpath_simulate_kernel(
     (zero-order-hold) delayed command ``ũ ← u + (ũ − u) e^(−h/τ)``; the delays are ring
     buffers of whole steps. ``(T_1, x_r)`` take one fixed-point iteration per step. States
     leaving their physical box are clamped and counted in ``diag[D_CLAMPS]``.
+
+    ``progress`` (int64, 2): ``[steps done, steps in all]``, written as it goes; the kernel
+    releases the GIL, so another thread reads it live (:mod:`estimation.progress`).
     """
     n_out = t_out.shape[0]
     h = (t_out[1] - t_out[0]) / n_sub if n_out > 1 else 1e-3
@@ -728,8 +732,11 @@ def airpath_simulate_kernel(
     cmd_vgt = cmd_vgt0
     p_ref = p_amb + ff[2]
     total = n_warmup + (n_out - 1) * n_sub + 1
+    progress[0] = 0
+    progress[1] = total
     k_out = 0
     for step in range(total):
+        progress[0] = step
         t = t_out[0] + (step - n_warmup) * h if step >= n_warmup else t_out[0]
         j_hint = _interp_inputs(t, time_in, inputs, j_hint, u_now)
         fuel_demand = u_now[0]

@@ -47,6 +47,7 @@ from estimation.plants.airpath_params import ActuatorSchedule, AirpathParams
 from estimation.plants.airpath_rho import manifold_rho1, rho_from_measurements
 from estimation.plants.airpath_sensors import MafErrorSpec, NoiseSpec
 from estimation.plants.sampling import decimation
+from estimation.progress import current as current_progress
 from estimation.signals import Signals
 
 __all__ = ["UNITS", "AirpathTruth", "actuator_feedforward", "simulate_airpath"]
@@ -227,6 +228,7 @@ def _plant_run(
     """Run :func:`~estimation.kernels.airpath_plant.airpath_simulate_kernel`; return
     ``(out, diag)``. With ``reuse`` the result is cached (keyed by every input's bytes;
     the last ``_PLANT_RUNS_MAX`` runs) and copies are returned."""
+    progress = current_progress()
     key = ""
     if reuse:
         h = hashlib.sha256()
@@ -238,13 +240,19 @@ def _plant_run(
         if key in _PLANT_RUNS:
             _PLANT_RUNS.move_to_end(key)
             out, diag = _PLANT_RUNS[key]
+            if progress is not None:
+                progress.next_stage()
+                progress.finish()
             return out.copy(), diag.copy()
     out = np.empty((t_out.size, apk.N_OUT))
     diag = np.zeros(apk.N_DIAG)
+    counts = progress.next_stage() if progress is not None else np.zeros(2, dtype=np.int64)
     apk.airpath_simulate_kernel(
         x.copy(), mem.copy(), t_in, inputs, use_controller, t_out, n_sub, n_warmup, prm, ctl,
-        out, diag,
+        out, diag, counts,
     )  # fmt: skip
+    if progress is not None:
+        progress.finish()
     if reuse:
         _PLANT_RUNS[key] = (out.copy(), diag.copy())
         while len(_PLANT_RUNS) > _PLANT_RUNS_MAX:

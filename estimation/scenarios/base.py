@@ -88,6 +88,16 @@ class Scenario:
     options: tuple[str, ...] = ()
     """Scenario-specific build options this entry accepts (``"transient_24s"``)."""
 
+    def check_duration(self, duration_s: float | None) -> None:
+        """A duration to simulate is at least one sample interval (two samples), as the REST
+        schema states per scenario, and at most the record; ``None`` is the whole record."""
+        shortest = 1.0 / self.rate_hz
+        if duration_s is not None and not shortest <= duration_s <= self.duration_s:
+            raise ConfigError(
+                f"duration must be in [{shortest:g}, {self.duration_s:g}] s for "
+                f"{self.name!r}, got {duration_s:g}"
+            )
+
     def build(
         self,
         *,
@@ -103,13 +113,7 @@ class Scenario:
         ``noise_scale``: factor on every sensor noise σ of the log, in [0, 100] (the
         estimators' σ settings are not scaled). ``transient_24s``: ``torque-si`` only, TQ
         §VI's transient at 24 s."""
-        # At least one sample interval (two samples), as the REST schema states per scenario.
-        shortest = 1.0 / self.rate_hz
-        if duration_s is not None and not shortest <= duration_s <= self.duration_s:
-            raise ConfigError(
-                f"duration must be in [{shortest:g}, {self.duration_s:g}] s for "
-                f"{self.name!r}, got {duration_s:g}"
-            )
+        self.check_duration(duration_s)
         level = check_level(mismatch)
         if averaging is not None:
             if self.averaging is None:

@@ -141,6 +141,44 @@ export const api = {
     });
   },
 
+  /**
+   * POST `body` to a route answering newline-delimited JSON (application/x-ndjson): calls
+   * onLine(doc) for each line as it arrives and resolves to the last one. A line
+   * {error, status} (the route failed after its stream began) rejects as an ApiError.
+   */
+  async stream(path, body, { onLine, signal } = {}) {
+    const response = await fetch(url(path), {
+      method: "POST",
+      signal,
+      headers: {
+        Accept: "application/x-ndjson",
+        "Content-Type": "application/json",
+        ...authHeaders(),
+      },
+      body: JSON.stringify(body),
+    }).catch((err) => {
+      if (err.name === "AbortError") throw err;
+      throw new ApiError(0, { code: "network", message: "The server cannot be reached." });
+    });
+    if (!response.ok) throw await errorFrom(response);
+    const reader = response.body.pipeThrough(new TextDecoderStream()).getReader();
+    let buffered = "";
+    let last = null;
+    for (;;) {
+      const { value, done } = await reader.read();
+      if (value) buffered += value;
+      const lines = buffered.split("\n");
+      buffered = done ? "" : lines.pop();
+      for (const line of lines) {
+        if (!line.trim()) continue;
+        last = JSON.parse(line);
+        if (last.error) throw new ApiError(last.status ?? 500, last.error);
+        onLine?.(last);
+      }
+      if (done) return last;
+    }
+  },
+
   /** Fetch a file (with auth) and hand it to the browser as a download. */
   async download(path, query, fallbackName = "download") {
     const response = await fetch(url(path, query), { headers: authHeaders() });

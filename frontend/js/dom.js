@@ -171,8 +171,27 @@ export function metricLabel(key) {
     "nis:mean": "Mean NIS",
     "nis:in_band": "NIS in 95 % band",
     "nis:innovation_mean": "Innovation mean",
+    "nis:mean_band_low": "Mean NIS band, low",
+    "nis:mean_band_high": "Mean NIS band, high",
+    "residual:mean": "Residual mean",
+    "residual:rms": "Residual RMS",
+    "residual:mean_over_rms": "Residual mean / RMS",
+    "residual:autocorr_lag1": "Residual autocorr. (lag 1)",
+    "residual:autocorr_band": "Residual autocorr. band",
   };
-  return known[key] ?? key.replaceAll("_", " ").replace(/^\w/, (c) => c.toUpperCase());
+  if (known[key]) return known[key];
+  // Truth-free checks an estimator has no honest form of (estimation/holdout.py), and the
+  // per-output held-out error and NIS of the observers (estimation/holdout_observers.py).
+  const na = /^(holdout|nis):not_applicable:(.+)$/.exec(key);
+  if (na) {
+    const what = na[1] === "holdout" ? "Held-out error" : "NIS";
+    return `${what}: n/a (${na[2].replaceAll("_", " ")})`;
+  }
+  const other = /^(holdout|nis):(.+)_(rmse|mean)$/.exec(key);
+  if (other) {
+    return other[1] === "holdout" ? `Held-out RMSE, ${other[2]}` : `Mean NIS, ${other[2]}`;
+  }
+  return key.replaceAll("_", " ").replace(/^\w/, (c) => c.toUpperCase());
 }
 
 export function debounce(fn, ms) {
@@ -198,11 +217,11 @@ export function toast(message, { error = false, ms = 4000 } = {}) {
 }
 
 /**
- * The bar of an upload form (role=progressbar, 0-100 in aria-valuenow): `el` goes in the
- * form; `start()` shows it empty, `set(f)` fills fraction f, `finish(ok)` ends it full and
+ * The bar of an upload or simulate form (role=progressbar, 0-100 in aria-valuenow, named by
+ * `label`): `el` goes in the form; `start()` shows it empty, `set(f)` fills fraction f, `finish(ok)` ends it full and
  * green or red.
  */
-export function uploadProgress() {
+export function uploadProgress({ label = "Upload progress" } = {}) {
   const bar = h("span");
   const el = h(
     "div",
@@ -210,7 +229,7 @@ export function uploadProgress() {
       class: "progress",
       hidden: true,
       role: "progressbar",
-      "aria-label": "Upload progress",
+      "aria-label": label,
       "aria-valuemin": "0",
       "aria-valuemax": "100",
       "aria-valuenow": "0",

@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
+import asyncio
 import json
-from typing import Annotated
+import logging
+from collections.abc import AsyncIterator
+from typing import Annotated, Any
 
 from fastapi import APIRouter, File, Form, Query, Response, UploadFile
+from fastapi.responses import StreamingResponse
+from starlette.concurrency import run_in_threadpool
 
 from app.api.deps import MAX_ID, Id, ServicesDep
 from app.api.schemas import (
@@ -17,10 +22,13 @@ from app.api.schemas import (
     PreviewOut,
     SimulateIn,
 )
-from app.errors import InvalidRequestError
+from app.errors import AppError, InvalidRequestError
 from app.io.names import name_schema
 from app.services.scenario_setup import setup_of
+from estimation.errors import EstimationError
+from estimation.progress import Progress
 
+log = logging.getLogger("mapwise")
 router = APIRouter(prefix="/datasets", tags=["datasets"], responses=ERRORS)
 # ``{dataset_id:int}``: only digits match, so ``GET /datasets/simulate`` reaches the POST-only
 # route of that path (405, Allow: POST) instead of failing as an id (422).
@@ -131,6 +139,72 @@ def simulate_dataset(services: ServicesDep, body: SimulateIn) -> DatasetOut:
         mismatch=body.mismatch,
     )
     return DatasetOut.of(dataset)
+
+
+PROGRESS_EVERY_S = 0.25
+"""Seconds between the progress lines of ``POST /datasets/simulate/stream``."""
+
+
+@router.post(
+    "/simulate/stream",
+    response_class=StreamingResponse,
+    responses={
+        200: {
+            "content": {"application/x-ndjson": {}},
+            "description": "One JSON document a line: {progress, stage} every 0.25 s while "
+            "the scenario is simulated (progress: share of the current plant run's integrator "
+            "steps, 0-1; stage: that run's number, from 1; 0 before the first), then "
+            "{dataset} (the 201 body of POST /datasets/simulate) "
+            "or {error, status} (the error body and the status the plain route answers).",
+        }
+    },
+)
+async def simulate_dataset_stream(services: ServicesDep, body: SimulateIn) -> StreamingResponse:
+    """``POST /datasets/simulate`` with progress: the same body, the same dataset, streamed as
+    newline-delimited JSON (docs/rest-api.md#simulate-progress). ``progress`` is the plant
+    integrator's share of steps done (:mod:`estimation.progress`), not a time estimate."""
+    services.datasets.check_simulation(body.scenario, body.duration_s)  # a 422 before the stream
+    progress = Progress()
+
+    def simulate() -> DatasetOut:
+        dataset = services.datasets.simulate(
+            body.scenario,
+            seed=body.seed,
+            name=body.name,
+            duration_s=body.duration_s,
+            mismatch=body.mismatch,
+            progress=progress,
+        )
+        return DatasetOut.of(dataset)
+
+    async def lines() -> AsyncIterator[bytes]:
+        task = asyncio.ensure_future(run_in_threadpool(simulate))
+        while True:
+            yield _line({"progress": round(progress.fraction, 4), "stage": progress.stage})
+            done, _ = await asyncio.wait({task}, timeout=PROGRESS_EVERY_S)
+            if done:
+                break
+        try:
+            out = task.result()
+        except AppError as exc:
+            yield _line(exc.body() | {"status": exc.status})
+        except EstimationError as exc:
+            error = InvalidRequestError(" ".join(str(exc).split()))
+            yield _line(error.body() | {"status": error.status})
+        except Exception as exc:  # the status line is sent: the error goes in the stream
+            log.exception("simulation failed", exc_info=exc)
+            error = AppError("internal error; see the server log")
+            error.code = "internal_error"
+            yield _line(error.body() | {"status": error.status})
+        else:
+            yield _line({"progress": 1.0, "stage": progress.stage})
+            yield _line({"dataset": out.model_dump(mode="json")})
+
+    return StreamingResponse(lines(), media_type="application/x-ndjson")
+
+
+def _line(document: dict[str, Any]) -> bytes:
+    return (json.dumps(document) + "\n").encode()
 
 
 @router.get("", response_model=PageOut[DatasetOut])

@@ -21,6 +21,7 @@ import {
   ICONS,
   pageHead,
   toast,
+  uploadProgress,
   withUnit,
 } from "../dom.js";
 import {
@@ -422,6 +423,8 @@ function simulateCard(ctx, onCreated) {
   const about = h("div", { class: "help", "data-scenario-about": "" });
   const submit = h("button", { type: "submit", class: "primary" }, icon(ICONS.flask), "Simulate");
   const progress = h("div", { class: "help", role: "status", "data-sim-progress": "" });
+  const bar = uploadProgress({ label: "Simulation progress" });
+  bar.el.dataset.simBar = "";
   let list = [];
   const form = h(
     "form",
@@ -441,6 +444,7 @@ function simulateCard(ctx, onCreated) {
       durationHelp,
     ),
     h("div", { class: "banner error", "data-form-error": "", hidden: true }),
+    bar.el,
     h("div", { class: "row end" }, progress, submit),
   );
 
@@ -480,23 +484,33 @@ function simulateCard(ctx, onCreated) {
     clearErrors(form);
     submit.disabled = true;
     submit.replaceChildren(icon(ICONS.flask), "Simulating…");
-    // The server answers when the whole record is simulated: show the time spent so far.
+    // The server streams the plant integrator's progress (share of its steps), then the
+    // dataset (POST /api/datasets/simulate/stream, docs/rest-api.md#simulate-progress).
     const started = performance.now();
-    const tick = () => {
-      const s = Math.round((performance.now() - started) / 1000);
-      progress.textContent = s >= 2 ? `Simulating… ${s} s so far` : "";
-    };
-    const timer = setInterval(tick, 1000);
+    bar.start();
+    let ok = false;
     try {
       const body = { scenario: select.value, seed: Number(seed.value || 0) };
       if (name.value.trim()) body.name = name.value.trim();
       if (duration.value.trim() !== "") body.duration_s = Number(duration.value);
-      const dataset = await api.post("/api/datasets/simulate", body, { signal: ctx.signal });
-      await onCreated(dataset);
+      const last = await api.stream("/api/datasets/simulate/stream", body, {
+        signal: ctx.signal,
+        onLine: (doc) => {
+          if (typeof doc.progress !== "number") return;
+          bar.set(doc.progress);
+          const s = Math.round((performance.now() - started) / 1000);
+          // Each plant run of the build is a stage (air-path scenarios have two).
+          const part = doc.stage > 1 ? `part ${doc.stage}, ` : "";
+          progress.textContent = `Simulating… ${part}${Math.round(doc.progress * 100)} % (${s} s)`;
+        },
+      });
+      ok = true;
+      await onCreated(last.dataset);
     } catch (err) {
       showError(form, err);
     } finally {
-      clearInterval(timer);
+      bar.finish(ok);
+      bar.el.hidden = true;
       progress.textContent = "";
       submit.disabled = false;
       submit.replaceChildren(icon(ICONS.flask), "Simulate");
