@@ -100,6 +100,7 @@ export function sortHeader(columns, sort, onSort) {
         {
           scope: "col",
           class: c.num ? "num" : null,
+          title: c.title || null,
           "aria-sort": c.sortable === false ? null : state,
         },
         c.sortable === false

@@ -1,8 +1,9 @@
 """Editing a finished run's map in the run view: cells picked on the map plot and in the cell
 grid (click, shift-click, drag, keyboard), smoothed, undone and redone (buttons and
 Ctrl+Z / Ctrl+Y), one locked and the others reset to the run's base map (θ0), then saved as
-a named base map, which the API returns with the edited values, the run and version as its
-lineage and the edit log."""
+a labelled version (a base map, docs/dashboard.md), which the API returns with the edited
+values, the run and version as its lineage and the edit log; then accepted, set and rejected
+(back to θ0) and the reject undone."""
 
 from __future__ import annotations
 
@@ -127,11 +128,17 @@ def test_edit_a_learned_map_and_save_it_as_a_base_map(page: Page, api) -> None:
     expect(page.locator("[data-edit-status]")).to_contain_text("1 locked")
     shot(page, "map-edit")
 
-    # Save as a named base map; the API has the edited grid, its lineage and the edits.
+    # Save as a labelled version (a base map, docs/dashboard.md): the form shows its lineage
+    # first; the API has the edited grid, its lineage and the edits.
+    lineage_note = page.locator("[data-edit-lineage]")
+    expect(lineage_note).to_contain_text(f"run {run['id']}, v{version['number']}, 3 edit(s)")
+    expect(lineage_note).to_contain_text("smooth, lock, reset")
+    expect(page.locator("[data-edit-save]")).to_have_text("Save as version…")
     page.fill("#edit-name", "NOx map, edited")
     page.locator("[data-edit-save]").click()
     saved = page.locator("[data-edit-saved]")
-    expect(saved).to_contain_text("Saved base map")
+    expect(saved).to_contain_text("Saved version “NOx map, edited” (base map #")
+    expect(saved).to_contain_text(f"lineage: run {run['id']}, v{version['number']}, 3 edit(s)")
     base_id = int(saved.get_attribute("data-edit-saved") or 0)
     base = api.get(f"/api/base-maps/{base_id}").json()
     assert base["name"] == "NOx map, edited"
@@ -163,6 +170,17 @@ def test_edit_a_learned_map_and_save_it_as_a_base_map(page: Page, api) -> None:
     page.fill("#edit-set-value", "123.5")
     page.locator('[data-edit-op="set"]').click()
     accepted[0:2, 0:3] = 123.5
+    np.testing.assert_array_equal(shown_values(page), accepted)
+
+    # Reject on the selection: its cells back to the base map (θ0), the rest as they were;
+    # Undo brings the typed values back.
+    expect(page.locator(f'{PANEL} td[aria-selected="true"]')).to_have_count(6)
+    page.locator('[data-edit-op="reject"]').click()
+    rejected = accepted.copy()
+    rejected[0:2, 0:3] = THETA0
+    np.testing.assert_array_equal(shown_values(page), rejected)
+    expect(page.locator("[data-edit-lineage]")).to_contain_text("accept, set, reject)")
+    page.locator("[data-edit-undo]").click()
     np.testing.assert_array_equal(shown_values(page), accepted)
 
     # Closing the editor shows the stored version again.

@@ -146,6 +146,54 @@ def test_cell_states_mark_filled_cells(page: Page) -> None:
     assert states == [[0, 2], [1, 1]]
 
 
+def test_lpv_fill_marks_the_filled_cells(page: Page, api) -> None:
+    """An LPV run with ``config.fill = "quadratic"`` (LPV (37)): its finished map has values in
+    cells no sample reached, and the run view marks exactly those cells as filled."""
+    sim = api.post(
+        "/api/datasets/simulate",
+        json={"scenario": "maf-whtc", "seed": 1, "duration_s": 30.0},
+        timeout=120,
+    )
+    assert sim.status_code == 201, sim.text
+    dataset = sim.json()
+    setup = api.get(f"/api/datasets/{dataset['id']}/setup").json()["estimators"]["lpv"]
+    body = {
+        "dataset_id": dataset["id"],
+        "estimator": "lpv",
+        "signals": setup["signals"],
+        "config": {**setup["config"], "fill": "quadratic"},
+    }
+    if setup["table"] is not None:
+        body["table"] = setup["table"]
+    created = api.post("/api/runs", json=body)
+    assert created.status_code == 201, created.text
+    run = wait_run(api, created.json()["id"])
+    assert run["status"] == "succeeded", run["error"]
+    final = final_version(api, run["id"])
+    values, visits = final["values"], final["visits"]
+    filled = {
+        (i, j)
+        for i, row in enumerate(visits)
+        for j, n in enumerate(row)
+        if n <= 0 and values[i][j] != 0.0  # θ0 = 0: moved without a sample
+    }
+    assert len(filled) > 10, filled
+
+    page.goto(f"/runs/{run['id']}")
+    expect(page.locator("[data-run-status] .badge")).to_have_text("succeeded")
+    page.wait_for_function(
+        "() => (document.querySelector('[data-plot=map]')?.data || [])"
+        ".some(t => t.name === 'filled cells')"
+    )
+    marks = next(t for t in plot_data(page, '[data-plot="map"]') if t["name"] == "filled cells")
+    axes = [a["breakpoints"] for a in (setup["table"] or setup["config"])["axes"]]
+    shown = {
+        (axes[0].index(x), axes[1].index(y)) for x, y in zip(marks["x"], marks["y"], strict=True)
+    }
+    assert shown == filled
+    expect(page.locator("[data-map-legend]").first).to_contain_text("filled")
+
+
 def test_error_map_absent_without_truth(page: Page, api) -> None:
     """A log without truth: no error map and no request for one (no 404 in the console)."""
     from tests.frontend.browser import upload_example

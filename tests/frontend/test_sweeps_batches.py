@@ -400,6 +400,20 @@ def test_a_batch_over_three_vehicles_shows_the_aggregate_and_each_deviation(
     expect(page.locator('[data-show-vehicle="3"]')).to_be_focused()
     expect(page).to_have_url(re.compile(r"\?vehicle=3$"))
 
+    # In the runs list the batch's three runs sit under one expandable row, linked to it.
+    page.goto("/compare")
+    group = page.locator(
+        f'[data-runs-table] tr[data-group-id="{batch_id}"][data-group-kind="batch"]'
+    )
+    expect(group).to_contain_text("Batch")
+    expect(group.locator("[data-group-size]")).to_have_text("· 3 runs")
+    expect(group.locator(f'a[href="/batches/{batch_id}"]')).to_be_visible()
+    group.locator("[data-group-toggle]").click()
+    children = page.locator(f'[data-runs-table] tr[data-parent-group="{batch_id}"]')
+    expect(children).to_have_count(3)
+    shown = sorted(int(x) for x in children.evaluate_all("rs => rs.map(r => r.dataset.runId)"))
+    assert shown == sorted(r["id"] for r in batch["runs"])
+
 
 def test_the_lists_and_views_have_urls_labels_and_navigation(
     page: Page, api: httpx.Client, server: Server, fleet: list[dict]

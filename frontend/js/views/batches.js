@@ -12,7 +12,6 @@ import { DEVIATION_RANGE, DEVIATION_Z, EVT, GROUP_POLL_MS, RUN_ACTIVE } from "..
 import {
   card,
   fill,
-  fmt,
   fmtDuration,
   h,
   icon,
@@ -23,6 +22,7 @@ import {
 } from "../dom.js";
 import { followGroup, groupTable, progressBar, progressOf } from "../groups.js";
 import { MapPlot, SliceGroup } from "../map-plot.js";
+import { fmtMetric, metricFormula } from "../metric-names.js";
 import { axis, baseLayout, purge, react, STATIC_CONFIG, theme, withAlpha } from "../plot.js";
 import { poll } from "../poll.js";
 
@@ -159,6 +159,7 @@ async function batchView(root, ctx, id) {
     const keys = [...new Set(batch.runs.flatMap((r) => Object.keys(r.metrics ?? {})))].filter(
       (k) => !HIDDEN_METRICS.has(k),
     );
+    const all = Object.assign({}, ...batch.runs.map((r) => r.metrics ?? {}));
     const deviating = batch.aggregate?.deviating_cells ?? null;
     const head = h(
       "tr",
@@ -167,7 +168,13 @@ async function batchView(root, ctx, id) {
       h("th", { scope: "col" }, "Dataset"),
       h("th", { scope: "col" }, "Run"),
       h("th", { scope: "col" }, "Status"),
-      keys.map((k) => h("th", { scope: "col", class: "num" }, metricLabel(k))),
+      keys.map((k) =>
+        h(
+          "th",
+          { scope: "col", class: "num", title: metricFormula(k, all) || null },
+          metricLabel(k),
+        ),
+      ),
       deviating ? h("th", { scope: "col", class: "num" }, `Cells |z| > ${DEVIATION_Z}`) : null,
     );
     const rows = batch.runs.map((r, k) => {
@@ -212,15 +219,7 @@ async function batchView(root, ctx, id) {
         h("td", { title: r.error ?? null }, statusBadge(r.status)),
         keys.map((key) => {
           const v = r.metrics?.[key] ?? null;
-          return h(
-            "td",
-            { class: "num" },
-            key === "run_s"
-              ? fmtDuration(v)
-              : key === "coverage" && v !== null
-                ? `${fmt(v * 100, 3)} %`
-                : fmt(v),
-          );
+          return h("td", { class: "num" }, key === "run_s" ? fmtDuration(v) : fmtMetric(key, v));
         }),
         deviating
           ? h(

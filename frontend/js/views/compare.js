@@ -26,7 +26,9 @@ import { errorOf, groupByAxis, stackAxes } from "../error-axes.js";
 import { diffNested, sameGrid } from "../grid-math.js";
 import { MapPlot, SliceGroup } from "../map-plot.js";
 import { axis, baseLayout, purge, react, SERIES_COLORS } from "../plot.js";
+import { fmtMetric, metricFormula } from "../metric-names.js";
 import { poll } from "../poll.js";
+import { runQuantity } from "../quantity.js";
 import { SCOPE } from "../scopes.js";
 import { runsListCard } from "./runs-list.js";
 import { decimate, SeriesStore } from "../series.js";
@@ -157,6 +159,11 @@ export async function mount(root, ctx) {
 
   const pendingDraws = [];
 
+  /** Every metric any of the runs has (metricFormula reads rmse by whether map_rmse is there). */
+  function metricsOf(runs) {
+    return Object.assign({}, ...runs.map((r) => r.metrics ?? {}));
+  }
+
   function metricsCard(runs) {
     const keys = [...new Set(runs.flatMap((r) => Object.keys(r.metrics ?? {})))];
     const columns = [
@@ -166,6 +173,7 @@ export async function mount(root, ctx) {
       ...keys.map((k) => ({
         key: `m:${k}`,
         label: metricLabel(k),
+        title: metricFormula(k, metricsOf(runs)),
         num: true,
         value: (r) => r.metrics?.[k] ?? null,
         metric: k,
@@ -198,7 +206,7 @@ export async function mount(root, ctx) {
           view.sort.key === c.key ? (view.sort.dir > 0 ? "ascending" : "descending") : "none";
         return h(
           "th",
-          { scope: "col", class: c.num ? "num" : null, "aria-sort": sort },
+          { scope: "col", class: c.num ? "num" : null, title: c.title || null, "aria-sort": sort },
           h(
             "button",
             {
@@ -253,7 +261,7 @@ export async function mount(root, ctx) {
           return h(
             "td",
             { class: `num${isBest ? " best" : ""}`, title: isBest ? "best" : null },
-            c.metric === "coverage" && typeof v === "number" ? `${fmt(v * 100, 3)} %` : fmt(v),
+            c.metric ? fmtMetric(c.metric, v) : fmt(v),
           );
         }),
       ),
@@ -275,13 +283,6 @@ export async function mount(root, ctx) {
     });
   }
 
-  function unitOf(run) {
-    const ds = datasets.find((d) => d.id === run.dataset_id);
-    return (
-      ds?.channels?.find((c) => c.name === run.signals?.y)?.unit ?? run.config?.output_unit ?? ""
-    );
-  }
-
   function finalMapsCard(mapRuns) {
     // One colour scale for all maps; its ends are the 2–98 % quantiles so one wild cell
     // does not wash out the rest (hover still shows the true values).
@@ -296,8 +297,9 @@ export async function mount(root, ctx) {
         role: "img",
         "aria-label": `Final map of run ${r.id}`,
       });
-      const label = r.signals?.y ?? "value";
-      const p = new MapPlot(el, { kind: "value", unit: unitOf(r), label, slices: view.slices });
+      const { label, unit } = runQuantity(r, datasets);
+      const p = new MapPlot(el, { kind: "value", unit, label, slices: view.slices });
+      p.barLabel = label;
       if (range && range[1] > range[0]) p.setRange(range);
       view.plots.push(p);
       pendingDraws.push(() => p.render(r.final_version));
@@ -372,12 +374,9 @@ export async function mount(root, ctx) {
         role: "img",
         "aria-label": `Run ${r.id} minus run ${ref.id}`,
       });
-      const p = new MapPlot(el, {
-        kind: "diff",
-        unit: unitOf(r),
-        label: r.signals?.y ?? "value",
-        slices: view.slices,
-      });
+      const { label, unit } = runQuantity(r, datasets);
+      const p = new MapPlot(el, { kind: "diff", unit, label, slices: view.slices });
+      p.barLabel = `Δ ${label}`;
       view.plots.push(p);
       const frame = {
         ...r.final_version,

@@ -6,7 +6,7 @@
  * opens the run. While runs are queued or running the view refreshes every second, in place
  * (Plotly.react). URL: /sweeps/7?x=sigma_v&sort=metric:desc (plotted parameter, sorted column).
  */
-import { api } from "../api.js";
+import { api, estimators } from "../api.js";
 import { EVT, GROUP_POLL_MS, LOG_AXIS_RATIO } from "../constants.js";
 import { card, fill, fmt, h, icon, ICONS, metricLabel, pageHead, statusBadge } from "../dom.js";
 import {
@@ -22,7 +22,9 @@ import {
   sortRows,
 } from "../groups.js";
 import { axis, baseLayout, purge, react, SCALE_VIRIDIS, theme, withAlpha } from "../plot.js";
+import { fmtMetric, metricFormula, metricUnit, PERCENT_METRICS } from "../metric-names.js";
 import { poll } from "../poll.js";
+import { runQuantity } from "../quantity.js";
 
 export const title = "Sweeps";
 
@@ -102,6 +104,19 @@ async function sweepView(root, ctx, id) {
     .get(`/api/datasets/${request.dataset_id}`, { signal: ctx.signal })
     .catch(() => null);
   const metricName = metricLabel(sweep.metric ?? "metric");
+  // The metric's unit: its runs' output unit (their dataset's column, else the map quantity),
+  // or per cent for shares; plotted shares keep their 0–1 values and format their ticks.
+  const catalog = await estimators().catch(() => []);
+  const torque = catalog.find((e) => e.name === request.estimator)?.kind === "torque";
+  const outputUnit = runQuantity(
+    { ...request, config: request.config ?? {} },
+    dataset ? [dataset] : [],
+  ).unit;
+  const metricUnitText = metricUnit(sweep.metric ?? "", outputUnit, { torque });
+  const percent = PERCENT_METRICS.has(sweep.metric);
+  const metricTitle = metricUnitText ? `${metricName} [${metricUnitText}]` : metricName;
+  const hoverFormat = percent ? ":.3%" : ":.4g";
+  const hoverUnit = metricUnitText && !percent ? ` ${metricUnitText}` : "";
   const lowerBetter = sweep.order !== "max";
   const isGrid = request.samples === null || request.samples === undefined;
   const wantX = ctx.query.get("x");
@@ -150,7 +165,13 @@ async function sweepView(root, ctx, id) {
       param: p,
       value: (r) => r.params?.[p] ?? null,
     })),
-    { key: "metric", label: metricName, num: true, value: (r) => r.metric ?? null },
+    {
+      key: "metric",
+      label: metricName,
+      title: metricFormula(sweep.metric ?? "") || null,
+      num: true,
+      value: (r) => r.metric ?? null,
+    },
     { key: "status", label: "Status", value: (r) => r.status },
   ];
   if (!columns.some((c) => c.key === view.sort.key)) view.sort = { ...DEFAULT_SORT };
@@ -249,7 +270,7 @@ async function sweepView(root, ctx, id) {
             { class: "help", "data-sweep-best": "" },
             "Best so far: ",
             h("a", { href: `/runs/${best}` }, `run #${best}`),
-            ` · ${metricName} ${fmt(bestRun.metric)} · `,
+            ` · ${metricName} ${fmtMetric(sweep.metric, bestRun.metric)}${hoverUnit} · `,
             params.map((p) => `${p} = ${fmtParam(bestRun.params?.[p])}`).join(", "),
           )
         : null,
@@ -314,7 +335,7 @@ async function sweepView(root, ctx, id) {
               return h(
                 "td",
                 { class: `num${isBest ? " best" : ""}`, "data-metric": r.metric ?? "" },
-                fmt(r.metric),
+                fmtMetric(sweep.metric, r.metric),
               );
             return h("td", { title: r.error ?? null }, statusBadge(r.status));
           }),
@@ -363,7 +384,7 @@ async function sweepView(root, ctx, id) {
           r.id,
           others.map((p) => `${p} = ${fmtParam(r.params[p])}`).join("<br>"),
         ]),
-        hovertemplate: `run #%{customdata[0]}<br>${x} = %{x}${detail}<br><b>${metricName} = %{y:.4g}</b><extra></extra>`,
+        hovertemplate: `run #%{customdata[0]}<br>${x} = %{x}${detail}<br><b>${metricName} = %{y${hoverFormat}}${hoverUnit}</b><extra></extra>`,
         marker: {
           size: pts.map((r) => (r.id === best ? 17 : 9)),
           symbol: pts.map((r) => (r.id === best ? "star" : "circle")),
@@ -397,7 +418,7 @@ async function sweepView(root, ctx, id) {
       data,
       baseLayout({
         xaxis: axis(x, { type: log ? "log" : numeric ? "linear" : "category", ...ticks }),
-        yaxis: axis(metricName),
+        yaxis: axis(metricTitle, percent ? { tickformat: ".1%" } : {}),
         margin: { l: 64, r: 16, t: 16, b: 48 },
         showlegend: false,
         annotations,
@@ -428,7 +449,7 @@ async function sweepView(root, ctx, id) {
         z,
         customdata,
         hovertemplate:
-          `${px} = %{customdata[1]}<br>${py} = %{customdata[2]}<br><b>${metricName} = %{z:.4g}</b>` +
+          `${px} = %{customdata[1]}<br>${py} = %{customdata[2]}<br><b>${metricName} = %{z${hoverFormat}}${hoverUnit}</b>` +
           "<br>run #%{customdata[0]} (%{customdata[3]})<extra></extra>",
         // Best at the bright end of the scale whichever way the metric ranks.
         colorscale: SCALE_VIRIDIS,
@@ -443,7 +464,8 @@ async function sweepView(root, ctx, id) {
           x: 1.01,
           xpad: 6,
           tickfont: { size: 11, color: t.text3 },
-          title: { text: metricName, side: "right", font: { size: 11.5, color: t.text2 } },
+          title: { text: metricTitle, side: "right", font: { size: 11.5, color: t.text2 } },
+          ...(percent ? { tickformat: ".1%" } : {}),
         },
       },
     ];

@@ -10,6 +10,7 @@ import { EVT, EXPORT_FORMATS } from "../constants.js";
 import { card, fmt, fmtInt, h, icon, ICONS, pageHead, toast } from "../dom.js";
 import { diffNested, sameGrid } from "../grid-math.js";
 import { MapPlot, SliceGroup } from "../map-plot.js";
+import { runQuantity } from "../quantity.js";
 import { SCOPE } from "../scopes.js";
 
 export const title = "Versions";
@@ -83,12 +84,7 @@ export async function mount(root, ctx) {
   const slices = new SliceGroup();
   const unitOf = (runId) => {
     const r = runs.find((x) => x.id === runId);
-    const ds = datasets.find((d) => d.id === r?.dataset_id);
-    return {
-      unit:
-        ds?.channels?.find((c) => c.name === r?.signals?.y)?.unit ?? r?.config?.output_unit ?? "",
-      label: r?.signals?.y ?? "value",
-    };
+    return runQuantity(r, datasets);
   };
 
   const stats = h("div", { "data-diff-stats": "" });
@@ -243,6 +239,7 @@ export async function mount(root, ctx) {
     });
     const { unit, label } = unitOf(side.run);
     plots[key] = new MapPlot(plotEl, { kind: "value", unit, label, slices });
+    plots[key].barLabel = label;
     const el = card({
       title: key === "a" ? "Version A" : "Version B",
       cls: `version-side ${key}`,
@@ -298,9 +295,10 @@ export async function mount(root, ctx) {
     }
     const { unit, label } = unitOf(side.run);
     plots[key].unit = unit;
-    plots[key].label = label;
+    plots[key].label = plots[key].barLabel = label;
     plots.diff.unit = unit;
     plots.diff.label = label;
+    plots.diff.barLabel = `Δ ${label}`;
     fillVersions(key);
     await loadVersion(key);
   }

@@ -67,20 +67,29 @@ export function editPanel({ unit, act }) {
     maxlength: "200",
   });
   const savedNote = h("div", { class: "help", "aria-live": "polite", "data-edit-saved": "" });
+  // What the saved version comes from: the run, its version and the edits (edit.js fills it).
+  const lineageNote = h("div", { class: "help", "data-edit-lineage": "" });
   const form = h(
     "form",
     {
       class: "row",
       novalidate: true,
-      "aria-label": "Save the edited map",
+      "aria-label": "Save the edited map as a labelled version",
       "data-needs": SCOPE.admin,
     },
-    h("label", { for: "edit-name", style: { margin: 0 } }, "Name"),
+    h("label", { for: "edit-name", style: { margin: 0 } }, "Version label"),
     h("div", { class: "field", style: { margin: 0, flex: 1 } }, nameInput),
     h(
       "button",
-      { type: "submit", class: "small primary", "data-edit-save": "" },
-      "Save as base map",
+      {
+        type: "submit",
+        class: "small primary",
+        "data-edit-save": "",
+        title:
+          "Store the edited map as a labelled map version (a base map: New run starts from it), " +
+          "with the run, version and edits it comes from",
+      },
+      "Save as version…",
     ),
     button("Close editor", { "data-edit-discard": "" }, "end", "small ghost"),
     h("div", { class: "form-error", hidden: true, "data-form-error": "" }),
@@ -98,12 +107,13 @@ export function editPanel({ unit, act }) {
     sliceNote,
     gridHost,
     h("p", { class: "help" }, HELP),
+    lineageNote,
     form,
     savedNote,
   );
   const el = card({
     title: "Edit map",
-    hint: "lock, reset, smooth, accept or reject cells; save as a base map",
+    hint: "lock, reset, smooth, accept or reject cells; save as a labelled version",
     body: [h("div", { class: "row" }, startButton, availability), panel],
   });
   el.dataset.editCard = "";
@@ -121,6 +131,7 @@ export function editPanel({ unit, act }) {
     sliceNote,
     gridHost,
     nameInput,
+    lineageNote,
     savedNote,
   };
 }

@@ -3,8 +3,10 @@
  * shift-click for a rectangle, ctrl-click to add) or in the cell grid (edit-grid.js: also
  * drag and the keyboard), then lock them, reset them to the run's base map, smooth them, set
  * them to a value, accept or reject the learned values; undo and redo (buttons, Ctrl+Z /
- * Ctrl+Y); save the result as a new named base map with its lineage (POST /api/base-maps with
- * `values`, `edits`, source "edit").
+ * Ctrl+Y); save the result as a new labelled map version with its lineage. A labelled version
+ * of an edited map is a base map (POST /api/base-maps with `values`, `edits`, source "edit"):
+ * a run's own versions are the steps it estimated, so an edit is stored beside them, with the
+ * run, version and edit log as its lineage, and New run starts from it (docs/dashboard.md).
  *
  * The operations are the pure functions of map-edit-ops.js; the card is edit-panel.js. While
  * an edit is open the map plot shows the edited values with the selection outlined, and the
@@ -308,6 +310,11 @@ export function runEdit(v) {
     paint();
     const s = ed.state;
     const hist = ed.history;
+    ui.lineageNote.textContent =
+      `Lineage of the saved version: run ${v.id}, ${name()}` +
+      `${ed.version?.label ? ` “${ed.version.label}”` : ""}, ${s.log.length} edit(s)` +
+      (s.log.length ? ` (${s.log.map((e) => e.op).join(", ")})` : "") +
+      ".";
     ui.status.textContent =
       `${ed.sel.size} selected · ${s.locked.size} locked · ` +
       `${ops.editedCells(s).length} changed from ${name()} · ${s.log.length} edit(s), ` +
@@ -334,10 +341,10 @@ export function runEdit(v) {
     try {
       const map = await api.post("/api/base-maps", body);
       ui.savedNote.textContent =
-        `Saved base map #${map.id} “${map.name}” (from run ${v.id}, ${name()}, ` +
+        `Saved version “${map.name}” (base map #${map.id}; lineage: run ${v.id}, ${name()}, ` +
         `${s.log.length} edit(s)); New run offers it under “Import a base map”.`;
       ui.savedNote.dataset.editSaved = String(map.id);
-      toast(`Saved base map #${map.id} “${map.name}”.`);
+      toast(`Saved version “${map.name}” (base map #${map.id}).`);
     } catch (err) {
       showError(ui.el, err);
     }

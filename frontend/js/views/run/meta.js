@@ -17,7 +17,7 @@ import {
   statusBadge,
 } from "../../dom.js";
 import { exportMenu } from "../../export-menu.js";
-import { metricFormula, metricNameNode } from "../../metric-names.js";
+import { fmtMetric, metricFormula, metricNameNode } from "../../metric-names.js";
 import { SCOPE } from "../../scopes.js";
 
 /** Metrics shown by cards of their own (or not at all). */
@@ -227,7 +227,7 @@ function metricCards(v) {
     if (isTorque && (k === "mae" || k === "sd")) return torqueUnit;
     if (isTorque && k === "ise") return torqueUnit === "N·m" ? "N²·m²·s" : `(${torqueUnit})²·s`;
     if (k === "coverage") return "";
-    if (/rmse|max_abs|^holdout:.*mae$|^nis:innovation_mean$/.test(k)) {
+    if (/rmse|max_abs|^holdout:.*mae$|^nis:innovation_mean$|^residual:(mean|rms)$/.test(k)) {
       // An observer without an output channel (the joint EKF) scores its own estimate.
       return isTorque ? torqueUnit : outputUnit || s.series.pick("estimate")?.unit || "";
     }
@@ -238,13 +238,12 @@ function metricCards(v) {
   for (const k of Object.keys(s.metrics).sort((a, b) => rank(a) - rank(b))) {
     const value = s.metrics[k];
     if (typeof value !== "number" || OWN_CARDS.has(k) || k.startsWith("nis:mean_band")) continue;
-    const percent = k === "coverage" || k === "nis:in_band";
     // NIS (docs/tuning.md): its mean is read against the 95 % band of its χ² distribution.
     const band =
       k === "nis:mean" && "nis:mean_band_low" in s.metrics
         ? `95 % band ${fmt(s.metrics["nis:mean_band_low"])}–${fmt(s.metrics["nis:mean_band_high"])}`
         : "";
-    cards.push(metric(k, percent ? `${fmt(value * 100, 3)} %` : fmt(value), unitOf(k), band));
+    cards.push(metric(k, fmtMetric(k, value), unitOf(k), band));
   }
   const rejected = rejectedTotal(s.run.rejected ?? {});
   const samples = s.sample || Math.round((s.progress ?? 0) * s.nSamples);

@@ -38,19 +38,8 @@ const REJECTIONS_REFRESH_MS = 2000;
 /** Visits below this count as unvisited: one sample's worth of weight (coverage's threshold). */
 const MIN_VISITS = 1;
 
-/**
- * What the map holds when the run has no measured output column: the map observers' quantity
- * (app/services/truth_map.py MAP_QUANTITY, the same names and units).
- */
-const MAP_QUANTITY = {
-  lpv: { name: "MAF error ΔW_c", unit: "kg/s" },
-  "ekf-map": { name: "relative MAF error q", unit: "-" },
-};
-
-/** {name, unit} of a run's map values when it has no output column, else null. */
-export function mapQuantity(run) {
-  return MAP_QUANTITY[run?.estimator] ?? null;
-}
+/** {name, unit} of a run's map values when it has no output column (quantity.js). */
+export { mapQuantity } from "../../quantity.js";
 
 /**
  * Per-cell states (nested like values): see the module docstring. start: the run's θ0 (a
