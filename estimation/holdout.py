@@ -67,15 +67,7 @@ class HoldoutResult:
         out = {f"holdout:{k}": v for k, v in self.adapted.items()}
         out |= {f"holdout:base_{k}": v for k, v in self.base.items()}
         out["holdout:samples"] = float(self.scored)
-        nis = self.innovations
-        out |= {
-            "nis:mean": nis.mean_nis,
-            "nis:mean_band_low": nis.mean_nis_band[0],
-            "nis:mean_band_high": nis.mean_nis_band[1],
-            "nis:in_band": nis.in_band,
-            "nis:innovation_mean": nis.innovation_mean,
-        }
-        return out
+        return out | self.innovations.metrics()
 
     def to_dict(self) -> dict[str, Any]:
         return {

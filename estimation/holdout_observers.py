@@ -96,14 +96,7 @@ class ObserverHoldout:
         for name, errors in self.other.items():
             out[f"holdout:{name}_rmse"] = errors["rmse"]
         if self.innovations is not None:
-            nis = self.innovations
-            out |= {
-                "nis:mean": nis.mean_nis,
-                "nis:mean_band_low": nis.mean_nis_band[0],
-                "nis:mean_band_high": nis.mean_nis_band[1],
-                "nis:in_band": nis.in_band,
-                "nis:innovation_mean": nis.innovation_mean,
-            }
+            out |= self.innovations.metrics()
         out |= {f"nis:{name}_mean": v for name, v in self.other_nis.items()}
         if self.residual is not None:
             r = self.residual

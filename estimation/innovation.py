@@ -134,6 +134,16 @@ class InnovationStats:
         lo, hi = self.mean_nis_band
         return lo <= self.mean_nis <= hi
 
+    def metrics(self) -> dict[str, float]:
+        """The run metrics ``nis:*`` (dimensionless; docs/tuning.md#which-runs-report-what)."""
+        return {
+            "nis:mean": self.mean_nis,
+            "nis:mean_band_low": self.mean_nis_band[0],
+            "nis:mean_band_high": self.mean_nis_band[1],
+            "nis:in_band": self.in_band,
+            "nis:innovation_mean": self.innovation_mean,
+        }
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "samples": self.samples,

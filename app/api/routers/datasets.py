@@ -12,7 +12,7 @@ from fastapi import APIRouter, File, Form, Query, Response, UploadFile
 from fastapi.responses import StreamingResponse
 from starlette.concurrency import run_in_threadpool
 
-from app.api.deps import MAX_ID, Id, ServicesDep
+from app.api.deps import MAX_ID, Id, Services, ServicesDep
 from app.api.schemas import (
     ERRORS,
     DatasetOut,
@@ -131,12 +131,17 @@ def upload_dataset(
 @router.post("/simulate", status_code=201, response_model=DatasetOut)
 def simulate_dataset(services: ServicesDep, body: SimulateIn) -> DatasetOut:
     """A dataset simulated from a scenario; its truth is kept for the run metrics."""
+    return _simulate(services, body, None)
+
+
+def _simulate(services: Services, body: SimulateIn, progress: Progress | None) -> DatasetOut:
     dataset = services.datasets.simulate(
         body.scenario,
         seed=body.seed,
         name=body.name,
         duration_s=body.duration_s,
         mismatch=body.mismatch,
+        progress=progress,
     )
     return DatasetOut.of(dataset)
 
@@ -166,19 +171,8 @@ async def simulate_dataset_stream(services: ServicesDep, body: SimulateIn) -> St
     services.datasets.check_simulation(body.scenario, body.duration_s)  # a 422 before the stream
     progress = Progress()
 
-    def simulate() -> DatasetOut:
-        dataset = services.datasets.simulate(
-            body.scenario,
-            seed=body.seed,
-            name=body.name,
-            duration_s=body.duration_s,
-            mismatch=body.mismatch,
-            progress=progress,
-        )
-        return DatasetOut.of(dataset)
-
     async def lines() -> AsyncIterator[bytes]:
-        task = asyncio.ensure_future(run_in_threadpool(simulate))
+        task = asyncio.ensure_future(run_in_threadpool(_simulate, services, body, progress))
         while True:
             yield _line({"progress": round(progress.fraction, 4), "stage": progress.stage})
             done, _ = await asyncio.wait({task}, timeout=PROGRESS_EVERY_S)
