@@ -70,6 +70,41 @@ def wait_run(api: httpx.Client, run_id: int, timeout_s: float = 120.0) -> dict:
     raise AssertionError(f"run {run_id} still {run['status']} after {timeout_s} s")
 
 
+def scenario_run(
+    api: httpx.Client,
+    *,
+    scenario: str,
+    estimator: str,
+    seed: int,
+    duration_s: float,
+    config: dict | None = None,
+) -> tuple[dict, dict]:
+    """A finished run of ``estimator`` on the first ``duration_s`` of a simulated ``scenario``,
+    with the scenario's own setup (grid, signals, settings; ``config`` overrides settings),
+    so its known-truth metrics are scored; returns ``(run, setup)``."""
+    sim = api.post(
+        "/api/datasets/simulate",
+        json={"scenario": scenario, "seed": seed, "duration_s": duration_s},
+        timeout=120,
+    )
+    assert sim.status_code == 201, sim.text
+    dataset = sim.json()
+    setup = api.get(f"/api/datasets/{dataset['id']}/setup").json()["estimators"][estimator]
+    body = {
+        "dataset_id": dataset["id"],
+        "estimator": estimator,
+        "signals": setup["signals"],
+        "config": {**setup["config"], **(config or {})},
+    }
+    if setup["table"] is not None:
+        body["table"] = setup["table"]
+    created = api.post("/api/runs", json=body)
+    assert created.status_code == 201, created.text
+    run = wait_run(api, created.json()["id"])
+    assert run["status"] == "succeeded", run["error"]
+    return run, setup
+
+
 def plot_data(page: Page, selector: str) -> list[dict]:
     """The traces Plotly currently draws in the element matched by ``selector``."""
     return page.eval_on_selector(

@@ -10,7 +10,7 @@ import re
 import pytest
 from playwright.sync_api import Page, expect
 
-from tests.frontend.browser import wait_run
+from tests.frontend.browser import scenario_run
 
 QUANTITY = "MAF error ΔW_c [kg/s]"
 
@@ -20,26 +20,7 @@ def lpv_run(server) -> dict:
     """An LPV run on 30 s of simulated WHTC MAF data with the scenario's own setup (its grid, so
     the known-truth metrics, the mean relative error among them, are scored)."""
     with server.api() as api:
-        sim = api.post(
-            "/api/datasets/simulate",
-            json={"scenario": "maf-whtc", "seed": 1, "duration_s": 30.0},
-            timeout=120,
-        )
-        assert sim.status_code == 201, sim.text
-        dataset = sim.json()
-        setup = api.get(f"/api/datasets/{dataset['id']}/setup").json()["estimators"]["lpv"]
-        body = {
-            "dataset_id": dataset["id"],
-            "estimator": "lpv",
-            "signals": setup["signals"],
-            "config": setup["config"],
-        }
-        if setup["table"] is not None:
-            body["table"] = setup["table"]
-        created = api.post("/api/runs", json=body)
-        assert created.status_code == 201, created.text
-        run = wait_run(api, created.json()["id"])
-        assert run["status"] == "succeeded", run["error"]
+        run, _ = scenario_run(api, scenario="maf-whtc", estimator="lpv", seed=1, duration_s=30.0)
         assert isinstance(run["metrics"].get("mean_relative_error"), float), run["metrics"]
         return run
 

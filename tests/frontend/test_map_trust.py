@@ -13,7 +13,7 @@ import pytest
 from playwright.sync_api import Page, expect
 
 from estimation.plants.nox import nox_axes
-from tests.frontend.browser import plot_data, shot, wait_run
+from tests.frontend.browser import plot_data, scenario_run, shot, wait_run
 
 TRUST_JS = "/static/js/views/run/trust-maps.js"
 
@@ -149,26 +149,14 @@ def test_cell_states_mark_filled_cells(page: Page) -> None:
 def test_lpv_fill_marks_the_filled_cells(page: Page, api) -> None:
     """An LPV run with ``config.fill = "quadratic"`` (LPV (37)): its finished map has values in
     cells no sample reached, and the run view marks exactly those cells as filled."""
-    sim = api.post(
-        "/api/datasets/simulate",
-        json={"scenario": "maf-whtc", "seed": 1, "duration_s": 30.0},
-        timeout=120,
+    run, setup = scenario_run(
+        api,
+        scenario="maf-whtc",
+        estimator="lpv",
+        seed=1,
+        duration_s=30.0,
+        config={"fill": "quadratic"},
     )
-    assert sim.status_code == 201, sim.text
-    dataset = sim.json()
-    setup = api.get(f"/api/datasets/{dataset['id']}/setup").json()["estimators"]["lpv"]
-    body = {
-        "dataset_id": dataset["id"],
-        "estimator": "lpv",
-        "signals": setup["signals"],
-        "config": {**setup["config"], "fill": "quadratic"},
-    }
-    if setup["table"] is not None:
-        body["table"] = setup["table"]
-    created = api.post("/api/runs", json=body)
-    assert created.status_code == 201, created.text
-    run = wait_run(api, created.json()["id"])
-    assert run["status"] == "succeeded", run["error"]
     final = final_version(api, run["id"])
     values, visits = final["values"], final["visits"]
     filled = {
