@@ -263,7 +263,13 @@ def adapt(
     final = estimator.fit(log.signals)
     estimate_s = time.perf_counter() - t0
     return map_document(
-        final, samples=len(log.signals), load_s=load_s, estimate_s=estimate_s, warmup_s=warmup_s
+        final,
+        samples=len(log.signals),
+        load_s=load_s,
+        estimate_s=estimate_s,
+        warmup_s=warmup_s,
+        quantity=request.output,
+        unit=log.signals.units.get(request.output, ""),
     )
 
 

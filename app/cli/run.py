@@ -255,7 +255,21 @@ def execute_scenario(
         "timing": {"estimate_s": estimate_s},
     }
     if final.table is not None and data.true_map is not None:
-        result["map"] = map_document(final, samples=len(data.signals), estimate_s=estimate_s)
+        from app.services.truth_map import MAP_QUANTITY
+
+        cfg = result["config"]
+        quantity, unit = (
+            (cfg["output"], str(cfg.get("output_unit") or ""))
+            if cfg.get("output")
+            else MAP_QUANTITY.get(spec.name, ("", ""))
+        )
+        result["map"] = map_document(
+            final,
+            samples=len(data.signals),
+            estimate_s=estimate_s,
+            quantity=quantity,
+            unit=unit,
+        )
     metrics = score_run(final.outputs, final.status, table=final.table, truth=data)
     result["metrics"] = {k: _finite_or_none(v) for k, v in metrics.items()}
     return ScenarioRun(result=result, data=data, final=final, history=history)

@@ -29,9 +29,12 @@ def map_document(
     load_s: float | None = None,
     estimate_s: float,
     warmup_s: float | None = None,
+    quantity: str = "",
+    unit: str = "",
 ) -> dict[str, Any]:
     """The map document of a final snapshot (``timing.load_s`` and ``timing.warmup_s`` only
-    when given)."""
+    when given): what the map holds, ``quantity`` in ``unit`` (a table filter's output
+    column and its unit, the LPV and ekf-map quantity), then the map and its counts."""
     table = snapshot.table
     assert table is not None
     rejected = {k: int(v) for k, v in snapshot.rejected.items()}
@@ -42,6 +45,8 @@ def map_document(
         timing["warmup_s"] = warmup_s
     return {
         "estimator": snapshot.estimator,
+        "quantity": quantity,
+        "unit": unit,
         "axes": [a.to_dict() for a in table.axes],
         "values": table.values.tolist(),
         "variance": None if snapshot.variance is None else snapshot.variance.tolist(),

@@ -103,7 +103,7 @@ class RunExports:
             )
         quantity, unit = map_quantity(run)
         if fmt == "json":
-            document = self._map_document(run, version) | {"quantity": quantity, "unit": unit}
+            document = self._map_document(run, version)
             if linked is not None:
                 try:
                     document |= cal.json_extras(linked.char, table_of(version), linked.to_json())
@@ -162,7 +162,14 @@ class RunExports:
             rejected=version.rejected,
         )
         estimate_s = float(run.metrics.get("run_s") or 0.0)
-        return map_document(snapshot, samples=version.summary.step, estimate_s=estimate_s)
+        quantity, unit = map_quantity(run)
+        return map_document(
+            snapshot,
+            samples=version.summary.step,
+            estimate_s=estimate_s,
+            quantity=quantity,
+            unit=unit,
+        )
 
     def _run_signals(self, run: Run) -> Signals:
         """The run's channels and per-sample outputs at full rate (outputs where all finite).

@@ -59,6 +59,7 @@ def test_document_follows_contract_and_learns_the_map(
     assert json.loads(out_file.read_text()) == doc
     assert {"estimator", "axes", "values", "variance", "samples", "rejected", "timing"} <= set(doc)
     assert doc["estimator"] == estimator
+    assert doc["quantity"] == "y"  # what the map holds: the --y column
     assert doc["axes"] == [a.to_dict() for a in TRUE_MAP.axes]
     assert doc["samples"] == 4000
     assert set(doc["timing"]) >= {"load_s", "estimate_s"}

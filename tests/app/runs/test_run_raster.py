@@ -57,7 +57,8 @@ def _exported_rows(client: TestClient, run_id: int) -> list[dict[str, str]]:
     response = client.get(f"/api/runs/{run_id}/export", params=params)
     assert response.status_code == 200, response.text
     rows = list(csv.DictReader(io.StringIO(response.text)))
-    assert "prediction" in rows[0]  # the run's outputs: on the raster of the channels read
+    # the run's outputs (with the output's unit): on the raster of the channels read
+    assert any(k == "prediction" or k.startswith("prediction [") for k in rows[0]), list(rows[0])
     return rows
 
 
