@@ -77,6 +77,19 @@ class Cost:
     ops_per_sample: Callable[[int, int], float]
     max_cells: int | None = None
     size: Callable[[BaseModel], tuple[int, int]] = field(default=lambda c: table_size(c))
+    holdout_passes: float = 1.0
+    """Further runs of the estimator that the truth-free check of every run makes
+    (docs/tuning.md#which-runs-report-what): 1, a refit on the first 70 % of the log and a
+    prediction of the rest, made while the run's own data are still held; 0 for an estimator
+    without one (the torque estimators)."""
+
+    def run_memory_bytes(self, cells: int, samples: int, *, corners: int = 1) -> int:
+        """Predicted peak bytes of a service run: the run and its held-out refit beside it."""
+        return int((1.0 + self.holdout_passes) * self.memory_bytes(cells, samples, corners=corners))
+
+    def run_work(self, cells: int, samples: int, *, corners: int = 1) -> float:
+        """Predicted operations of a service run, its held-out refit included."""
+        return (1.0 + self.holdout_passes) * self.work(cells, samples, corners=corners)
 
     def memory_of(self, config: BaseModel, samples: int) -> int:
         """:meth:`memory_bytes` at the size of a validated ``config``."""

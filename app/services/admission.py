@@ -10,10 +10,13 @@ run budget").
 
 The predicted memory of a run is::
 
-    WORKER_BASE_BYTES + cost.memory_bytes(p, n, c) + 2 · 8 · channels · n
+    WORKER_BASE_BYTES + (1 + h) · cost.memory_bytes(p, n, c) + 2 · 8 · channels · n
 
-the worker process itself, the estimator's declared cost, and the dataset (its Parquet
-object as read from the artifact store, and the unpacked channels).
+the worker process itself, the estimator's declared cost for the run and for its held-out
+refit (``h = cost.holdout_passes``: 1, or 0 for an estimator without a truth-free check,
+since the refit runs while the run's own data are held), and the dataset (its Parquet object
+as read from the artifact store, and the unpacked channels). The compute time counts the
+refit's work the same way.
 """
 
 from __future__ import annotations
@@ -130,9 +133,9 @@ def admit_run(
     check_cells(cells, limits, field=table_field, spec=spec)
     cost = spec.cost
     data = FLOAT_BYTES * 2 * channels * samples
-    memory = WORKER_BASE_BYTES + cost.memory_bytes(cells, samples, corners=corners) + data
+    memory = WORKER_BASE_BYTES + cost.run_memory_bytes(cells, samples, corners=corners) + data
     if memory > limits.run_memory_bytes:
-        grows_with_table = cost.memory_bytes(cells, 0, corners=corners) > data
+        grows_with_table = cost.run_memory_bytes(cells, 0, corners=corners) > data
         raise OverBudgetError(
             f"{spec.name} on {cells:,} cells and {samples:,} samples: predicted "
             f"{human_bytes(memory)} > {human_bytes(limits.run_memory_bytes)} run budget "
@@ -156,7 +159,7 @@ def admit_run(
             f"budget (MAPWISE_RUN_VERSIONS_MB){hint}",
             field="config.version_every" if fits >= 1 else table_field,
         )
-    compute_s = cost.work(cells, samples, corners=corners) / OPS_PER_S_CEILING
+    compute_s = cost.run_work(cells, samples, corners=corners) / OPS_PER_S_CEILING
     if compute_s > limits.run_max_s:
         raise OverBudgetError(
             f"{spec.name} on {cells:,} cells and {samples:,} samples: at least "

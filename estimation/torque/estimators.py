@@ -284,6 +284,7 @@ TORQUE_COST = Cost(
     # and scoring temporaries (8)
     sample_floats=lambda c: 20,
     ops_per_sample=lambda p, c: 100,
+    holdout_passes=0.0,  # an unmeasured input: no held-out check to run (estimation/holdout.py)
 )
 
 _spec = family(

@@ -80,6 +80,22 @@ def test_a_small_run_is_admitted_with_its_prediction() -> None:
     assert plan.prediction.versions_bytes > 0
 
 
+@pytest.mark.parametrize(("name", "refits"), [("skf", 1), ("lpv", 1), ("ekf-map", 1), ("uio", 0)])
+def test_the_prediction_counts_the_held_out_refit(name: str, refits: int) -> None:
+    """Every run refits its estimator for the held-out metrics while its own data are held
+    (docs/reliability.md#admission): memory and work count it, except for the torque
+    estimators, which have no truth-free check."""
+    cost = get_spec(name).cost
+    cells, corners = (16, 4) if name != "uio" else (0, 1)
+    samples, channels = 100_000, 4
+    got = _admit(name, cells, samples=samples, corners=corners, channels=channels)
+    data = 8 * 2 * channels * samples
+    once = cost.memory_bytes(cells, samples, corners=corners)
+    assert got.memory_bytes == WORKER_BASE_BYTES + (1 + refits) * once + data
+    work = cost.work(cells, samples, corners=corners)
+    assert cost.run_work(cells, samples, corners=corners) == pytest.approx((1 + refits) * work)
+
+
 @pytest.mark.parametrize("name", ["skf", "sskf", "rls", "nlms", "lpv"])
 def test_the_global_cell_cap_names_the_table(name: str) -> None:
     with pytest.raises(OverBudgetError, match=r"250,001 cells > 250,000") as caught:
