@@ -57,6 +57,9 @@ class HealthOut(BaseModel):
 class ChannelOut(BaseModel):
     name: str
     unit: str
+    # In a dataset stored as recorded, the channel's own time base [start_s, stop_s, step_s]
+    # (docs/data-formats.md#multi-rate); null on a dataset stored on one time base.
+    timing: list[float] | None = None
 
 
 class DatasetOut(BaseModel):
@@ -76,6 +79,9 @@ class DatasetOut(BaseModel):
     # that had any (docs/data-formats.md#multi-rate); null when there is nothing to say.
     notes: list[str] | None = None
     masked: dict[str, int] | None = None
+    # Stored as recorded (channels on their own timestamps): a run may then choose its raster
+    # (config.raster, docs/rest-api.md#run-config).
+    recorded: bool = False
 
     @classmethod
     def of(cls, d: Dataset) -> DatasetOut:
@@ -86,7 +92,14 @@ class DatasetOut(BaseModel):
             rows=d.rows,
             rate_hz=d.rate_hz,
             duration_s=d.duration_s,
-            channels=[ChannelOut(name=c.name, unit=c.unit) for c in d.channels],
+            channels=[
+                ChannelOut(
+                    name=c.name,
+                    unit=c.unit,
+                    timing=None if c.timing is None else [float(v) for v in c.timing],
+                )
+                for c in d.channels
+            ],
             time_column=d.time_column,
             has_truth=d.has_truth,
             scenario=d.scenario,
@@ -94,6 +107,7 @@ class DatasetOut(BaseModel):
             created_at=d.created_at,
             notes=list(d.notes) or None,
             masked=d.masked or None,
+            recorded=d.recorded,
         )
 
 

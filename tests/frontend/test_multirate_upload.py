@@ -5,14 +5,16 @@ per channel (`docs/data-formats.md#multi-rate`)."""
 
 from __future__ import annotations
 
+import re
 import uuid
 from pathlib import Path
 
 import pytest
 from playwright.sync_api import Page, expect
 
-from tests.frontend.browser import shot
+from tests.frontend.browser import shot, wait_run
 from tests.frontend.conftest import Console
+from tests.support.helpers import log_csv
 from tests.support.measurements import NMOT, POLE, POLE_RAW, T100, write_measurement
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
@@ -100,3 +102,68 @@ def test_a_bad_raster_is_refused_next_to_its_field(
     raster = page.get_by_label("Raster", exact=True)
     expect(raster).to_have_attribute("aria-invalid", "true")
     expect(page.locator(".field-error")).to_contain_text("raster 'fast please' is not understood")
+
+
+def test_new_run_offers_the_raster_on_a_dataset_stored_as_recorded(
+    page: Page, api, console: Console, tmp_path: Path
+) -> None:
+    """On a dataset stored as recorded the run options have a Raster field listing the
+    channels' own steps; *Run again…* brings a run's raster back, a new one is sent as
+    config.raster and the run reads on it; a refused raster is named next to the field; on a
+    dataset on one time base the field is not offered."""
+    measurement = write_measurement(tmp_path)
+    name = f"recorded-{uuid.uuid4().hex[:8]}"
+    _upload(page, measurement.path, name)
+    row = page.locator("[data-dataset-list] tbody tr", has_text=name)
+    expect(row).to_have_attribute("aria-current", "true", timeout=20_000)
+    dataset = _dataset(api, name)
+    assert dataset["recorded"] is True
+    body = {
+        "dataset_id": dataset["id"],
+        "estimator": "skf",
+        "signals": {"y": POLE},
+        "table": {
+            "axes": [
+                {"name": "mode", "breakpoints": [0.0, 1.0, 2.0]},
+                {"name": "status", "breakpoints": [0.0, 3.0, 6.0, 9.0, 12.0]},
+            ]
+        },
+        "config": {"sigma_w": 0.01, "sigma_v": 0.05, "p0": 10.0, "raster": f"channel:{NMOT}"},
+    }
+    created = api.post("/api/runs", json=body)
+    assert created.status_code == 201, created.text
+    source = wait_run(api, created.json()["id"])
+    assert source["metrics"]["raster_s"] == pytest.approx(0.1)
+
+    page.goto(f"/runs/new?from={source['id']}")
+    raster = page.locator("#run-raster")
+    expect(raster).to_be_visible()
+    expect(raster).to_have_value(f"channel:{NMOT}")
+    expect(page.locator("#run-raster-help")).to_contain_text(f"{NMOT} 100 ms")
+    expect(page.locator("#run-raster-help")).to_contain_text("fast 1 ms")
+
+    console.allow(r"status of 422")
+    raster.fill("fast please")
+    page.locator("[data-start]").click()
+    expect(raster).to_have_attribute("aria-invalid", "true")
+    expect(page.locator(".field-error")).to_contain_text("not understood")
+
+    raster.fill("50ms")
+    with page.expect_request(lambda r: r.url.endswith("/api/runs") and r.method == "POST") as r:
+        page.locator("[data-start]").click()
+    assert r.value.post_data_json["config"]["raster"] == "50ms"
+    page.wait_for_url(re.compile(r"/runs/\d+$"))
+    run_id = int(page.url.rsplit("/", 1)[1])
+    assert wait_run(api, run_id)["metrics"]["raster_s"] == pytest.approx(0.05)
+
+    # A dataset on one time base: nothing to choose.
+    dense = api.post(
+        "/api/datasets",
+        files={"file": ("dense.csv", log_csv(200).encode())},
+        data={"name": f"dense-{uuid.uuid4().hex[:8]}"},
+    )
+    assert dense.status_code == 201, dense.text
+    assert dense.json()["recorded"] is False
+    page.goto(f"/runs/new?dataset={dense.json()['id']}")
+    expect(page.locator("#run-pace")).to_be_visible()
+    expect(page.locator("[data-run-raster]")).to_be_hidden()

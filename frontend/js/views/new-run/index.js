@@ -200,6 +200,7 @@ function renderAll(view) {
   renderConfig(view);
   renderSweep(view);
   view.options.gates.render();
+  view.options.renderRaster();
   updateSubmit(view);
 }
 

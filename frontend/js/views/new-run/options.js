@@ -1,9 +1,11 @@
 /**
  * The run options section: the run's name, its pace (a real-time multiple, to watch a
- * recorded cycle adapt), how often a map version is kept, and the sample gates.
+ * recorded cycle adapt), how often a map version is kept, the raster on a dataset stored as
+ * recorded (its channels on their own timestamps, docs/data-formats.md#multi-rate), and the
+ * sample gates.
  */
 import { PACES } from "../../constants.js";
-import { h } from "../../dom.js";
+import { fmt, h } from "../../dom.js";
 import { gatesEditor } from "./gates.js";
 
 /**
@@ -54,6 +56,35 @@ export function runOptions(view) {
   cadence.addEventListener("change", () => {
     cadenceN.hidden = !cadence.value;
   });
+  // Only a dataset stored as recorded has a raster to choose (the server refuses it
+  // otherwise, on config.raster); renderRaster() shows the field for one.
+  const raster = h("input", {
+    type: "text",
+    id: "run-raster",
+    name: "config.raster",
+    placeholder: "slowest of the channels read",
+    autocomplete: "off",
+    "aria-describedby": "run-raster-help",
+  });
+  const rasterHelp = h("div", { class: "help", id: "run-raster-help" });
+  const rasterField = h(
+    "div",
+    { class: "field", hidden: true, "data-run-raster": "" },
+    h("label", { for: "run-raster" }, "Raster"),
+    raster,
+    rasterHelp,
+  );
+  const renderRaster = () => {
+    const d = view.state.dataset;
+    rasterField.hidden = !d?.recorded;
+    if (!d?.recorded) return;
+    const steps = (d.channels ?? [])
+      .filter((c) => c.timing)
+      .map((c) => `${c.name} ${fmt(c.timing[2] * 1000, 3)} ms`);
+    rasterHelp.textContent =
+      "100Hz, 10ms or channel:NAME; empty: the slowest raster among the channels the run " +
+      `reads. This log's channels: ${steps.join(", ")}.`;
+  };
   // "Run again…": the reused run's options (setup.js), else the draft of a reload.
   const again = view.fromRun?.config ?? null;
   const gates = gatesEditor(view, again?.gates ?? draft?.gates ?? []);
@@ -71,6 +102,7 @@ export function runOptions(view) {
     }
     paceCustom.hidden = pace.value !== "custom";
     cadenceN.hidden = !cadence.value;
+    if (typeof again.raster === "string") raster.value = again.raster;
   }
   if (draft && !again) {
     runName.value = draft.options?.["run-name"] ?? "";
@@ -79,6 +111,7 @@ export function runOptions(view) {
       [paceCustom, "run-pace-custom"],
       [cadence, "run-cadence"],
       [cadenceN, "run-cadence-n"],
+      [raster, "run-raster"],
     ];
     for (const [el, id] of restore) {
       const v = draft.options?.[id];
@@ -114,6 +147,7 @@ export function runOptions(view) {
         cadence,
         cadenceN,
       ),
+      rasterField,
     ),
     h("div", { class: "label" }, "Sample gates"),
     h(
@@ -132,7 +166,8 @@ export function runOptions(view) {
     if (cadence.value) out.version_every = { [cadence.value]: Number(cadenceN.value) };
     const gateList = gates.read();
     if (gateList.length) out.gates = gateList;
+    if (!rasterField.hidden && raster.value.trim()) out.raster = raster.value.trim();
     return out;
   };
-  return { el, gates, read, name: () => runName.value.trim() };
+  return { el, gates, read, renderRaster, name: () => runName.value.trim() };
 }

@@ -15,7 +15,7 @@ import { api } from "../../api.js";
 import { h } from "../../dom.js";
 
 /** Keys of a run's config that the run options hold, not the estimator's form. */
-const SERVICE_KEYS = new Set(["pace", "version_every", "gates", "locked"]);
+const SERVICE_KEYS = new Set(["pace", "version_every", "gates", "locked", "raster"]);
 
 /** The setup of the state's dataset (null for none, or when the API has no such route). */
 export async function fetchSetup(view) {

@@ -170,7 +170,7 @@ function reportErrors(view, problems) {
   for (const { err, estimator } of problems) {
     const field = err.field ?? "";
     const inConfig =
-      field.startsWith("config") && !/^config\.(pace|version_every|gates)/.test(field);
+      field.startsWith("config") && !/^config\.(pace|version_every|gates|raster)/.test(field);
     if (inConfig && estimator && state.forms.has(estimator)) {
       if (firstTab === null || estimator === state.tab) firstTab = estimator;
       view.hosts.config
