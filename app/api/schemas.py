@@ -57,9 +57,6 @@ class HealthOut(BaseModel):
 class ChannelOut(BaseModel):
     name: str
     unit: str
-    # In a dataset stored as recorded, the channel's own time base [start_s, stop_s, step_s]
-    # (docs/data-formats.md#multi-rate); null on a dataset stored on one time base.
-    timing: list[float] | None = None
 
 
 class DatasetOut(BaseModel):
@@ -80,8 +77,10 @@ class DatasetOut(BaseModel):
     notes: list[str] | None = None
     masked: dict[str, int] | None = None
     # Stored as recorded (channels on their own timestamps): a run may then choose its raster
-    # (config.raster, docs/rest-api.md#run-config).
+    # (config.raster, docs/rest-api.md#run-config); ``timing`` gives each channel's own time
+    # base [start_s, stop_s, step_s] (docs/data-formats.md#multi-rate), null otherwise.
     recorded: bool = False
+    timing: dict[str, list[float]] | None = None
 
     @classmethod
     def of(cls, d: Dataset) -> DatasetOut:
@@ -92,14 +91,7 @@ class DatasetOut(BaseModel):
             rows=d.rows,
             rate_hz=d.rate_hz,
             duration_s=d.duration_s,
-            channels=[
-                ChannelOut(
-                    name=c.name,
-                    unit=c.unit,
-                    timing=None if c.timing is None else [float(v) for v in c.timing],
-                )
-                for c in d.channels
-            ],
+            channels=[ChannelOut(name=c.name, unit=c.unit) for c in d.channels],
             time_column=d.time_column,
             has_truth=d.has_truth,
             scenario=d.scenario,
@@ -108,6 +100,7 @@ class DatasetOut(BaseModel):
             notes=list(d.notes) or None,
             masked=d.masked or None,
             recorded=d.recorded,
+            timing={c.name: [float(v) for v in c.timing] for c in d.channels if c.timing} or None,
         )
 
 

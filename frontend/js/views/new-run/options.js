@@ -78,9 +78,9 @@ export function runOptions(view) {
     const d = view.state.dataset;
     rasterField.hidden = !d?.recorded;
     if (!d?.recorded) return;
-    const steps = (d.channels ?? [])
-      .filter((c) => c.timing)
-      .map((c) => `${c.name} ${fmt(c.timing[2] * 1000, 3)} ms`);
+    const steps = Object.entries(d.timing ?? {}).map(
+      ([name, [, , step]]) => `${name} ${fmt(step * 1000, 3)} ms`,
+    );
     rasterHelp.textContent =
       "100Hz, 10ms or channel:NAME; empty: the slowest raster among the channels the run " +
       `reads. This log's channels: ${steps.join(", ")}.`;
