@@ -175,7 +175,7 @@ class DatasetService:
     ) -> Dataset:
         """Simulate ``scenario`` and store it with its truth. ``progress``, when given, is
         what the build reports its integrator's steps into (:mod:`estimation.progress`)."""
-        self.check_simulation(scenario, duration_s)
+        self.check_simulation(scenario, duration_s, name)
         given = _dataset_name(name, None, f"{scenario} (seed {seed})")
         try:
             with reporting(progress or Progress()):
@@ -204,9 +204,11 @@ class DatasetService:
         )
 
     @staticmethod
-    def check_simulation(scenario: str, duration_s: float | None) -> None:
-        """The 422 a simulation of ``scenario`` for ``duration_s`` would end in, raised before
-        anything runs: an unknown scenario, or a duration outside its record."""
+    def check_simulation(scenario: str, duration_s: float | None, name: str | None) -> None:
+        """The 422 a simulation of ``scenario`` for ``duration_s`` named ``name`` would end in,
+        raised before anything runs: an unknown scenario, a duration outside its record, a
+        name with a control or format character."""
+        _dataset_name(name, None, "")
         if scenario not in scenarios():
             raise InvalidRequestError(
                 f"unknown scenario {scenario!r}; choose one of {sorted(scenarios())}",

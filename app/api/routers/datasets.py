@@ -168,7 +168,8 @@ async def simulate_dataset_stream(services: ServicesDep, body: SimulateIn) -> St
     """``POST /datasets/simulate`` with progress: the same body, the same dataset, streamed as
     newline-delimited JSON (docs/rest-api.md#simulate-progress). ``progress`` is the plant
     integrator's share of steps done (:mod:`estimation.progress`), not a time estimate."""
-    services.datasets.check_simulation(body.scenario, body.duration_s)  # a 422 before the stream
+    # Every 422 of the plain route that does not need the simulation, before the stream.
+    services.datasets.check_simulation(body.scenario, body.duration_s, body.name)
     progress = Progress()
 
     async def lines() -> AsyncIterator[bytes]:

@@ -67,6 +67,7 @@ def test_bad_input_is_the_plain_routes_422_before_any_line(client: TestClient) -
         ({"scenario": "skf-sim2", "duration_s": 1e6}, "duration_s"),
         ({"scenario": "no-such-scenario"}, "scenario"),
         ({"scenario": "skf-sim2", "seed": -1}, "seed"),
+        ({"scenario": "skf-sim2", "name": "\u0084"}, "name"),  # a control character
     ):
         response = client.post("/api/datasets/simulate/stream", json=body)
         assert response.status_code == 422, response.text
