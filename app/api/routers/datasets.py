@@ -174,6 +174,9 @@ async def simulate_dataset_stream(services: ServicesDep, body: SimulateIn) -> St
 
     async def lines() -> AsyncIterator[bytes]:
         task = asyncio.ensure_future(run_in_threadpool(_simulate, services, body, progress))
+        # A client that leaves mid-stream does not stop the simulation (the dataset is stored
+        # as by the plain route); its outcome is then read here, so nothing goes unretrieved.
+        task.add_done_callback(lambda t: t.cancelled() or t.exception())
         while True:
             yield _line({"progress": round(progress.fraction, 4), "stage": progress.stage})
             done, _ = await asyncio.wait({task}, timeout=PROGRESS_EVERY_S)
