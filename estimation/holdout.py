@@ -33,7 +33,7 @@ import numpy as np
 from pydantic import BaseModel
 
 from estimation.errors import ConfigError
-from estimation.filters.estimator import Prepared
+from estimation.filters.estimator import REGRESSOR_BLOCK, Prepared
 from estimation.innovation import InnovationStats, map_filter, run_innovations, stats_of
 from estimation.kernels.sensor import sensor_kernel
 from estimation.metrics import output_metrics
@@ -156,12 +156,11 @@ def holdout_error(
             "predict the rest"
         )
     table = fit.estimator.theta0.with_values(fit.state.theta.reshape(filt.grid.shape))
-    axes = [a.name for a in filt.config.axes]
-    U = signals.stack(axes)
+    inputs = [signals[a.name] for a in filt.config.axes]
     y = signals[filt.config.output]
     scored = mask[m:]
-    adapted = _predict(table, U, y, m, fit.prepared)
-    base = _predict(filt.theta0, U, y, m, fit.prepared)
+    adapted = _predict(table, inputs, y, m, fit.prepared)
+    base = _predict(filt.theta0, inputs, y, m, fit.prepared)
     return HoldoutResult(
         unit=filt.config.output_unit or signals.units.get(filt.config.output, ""),
         fraction=fraction,
@@ -175,14 +174,28 @@ def holdout_error(
     )
 
 
-def _predict(table: Table, U: np.ndarray, y: np.ndarray, m: int, prepared: Prepared) -> np.ndarray:
-    """Open-loop prediction of ``y[m:]`` by a frozen ``table`` (step 2 of the module
-    docstring), through the sensor model when the filter has one."""
+def _predict(
+    table: Table, inputs: list[np.ndarray], y: np.ndarray, m: int, prepared: Prepared
+) -> np.ndarray:
+    """Open-loop prediction of ``y[m:]`` by a frozen ``table`` from its axes' channels
+    ``inputs`` (step 2 of the module docstring), through the sensor model when the filter has
+    one."""
     settings = prepared.settings
+    tau = settings.delay if settings.has_sensor else 0
+    x = _evaluate(table, inputs, m - tau, len(y) - tau)
     if not settings.has_sensor:
-        return table.evaluate(U[m:])
-    tau = settings.delay
-    x = table.evaluate(U[m - tau : len(y) - tau])
+        return x
     out = np.empty(x.size)
     sensor_kernel(np.ascontiguousarray(x), 0, float(settings.lag), float(y[m - 1]), out)
+    return out
+
+
+def _evaluate(table: Table, inputs: list[np.ndarray], start: int, stop: int) -> np.ndarray:
+    """``table`` at the samples ``start … stop−1`` of its axes' channels, a
+    :data:`REGRESSOR_BLOCK` at a time (the regressor rows of a block are ``c`` indices and
+    weights a sample: made for the whole held-out part at once they were its memory peak)."""
+    out = np.empty(stop - start)
+    for a in range(start, stop, REGRESSOR_BLOCK):
+        z = min(a + REGRESSOR_BLOCK, stop)
+        out[a - start : z - start] = table.evaluate(np.column_stack([u[a:z] for u in inputs]))
     return out

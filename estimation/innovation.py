@@ -37,7 +37,7 @@ import numpy as np
 from pydantic import BaseModel
 
 from estimation.errors import ConfigError
-from estimation.filters.estimator import Prepared, TableFilter
+from estimation.filters.estimator import REGRESSOR_BLOCK, Prepared, TableFilter
 from estimation.filters.functions import run_chunk
 from estimation.filters.state import FilterState
 from estimation.registry import EstimatorKind, get_spec
@@ -84,20 +84,24 @@ def map_filter(name: str, config: BaseModel | dict[str, Any]) -> TableFilter:
 def run_innovations(
     estimator: TableFilter, signals: Signals, accept: np.ndarray | None = None
 ) -> Innovations:
-    """Run ``estimator`` over ``signals`` in one kernel call and keep ``e_k`` and ``S_k``."""
+    """Run ``estimator`` over ``signals`` and keep ``e_k`` and ``S_k``: :func:`run_chunk` a
+    :data:`REGRESSOR_BLOCK` of steps at a time, whose regressor rows (``c`` indices and
+    weights a step) are made per block, so only the per-step results span the log; the
+    kernel carries its state across blocks, so the result is that of one call."""
     prepared = estimator.prepare(signals, accept)
     state = estimator.initial_state(prepared)
-    s = np.empty(prepared.y.size)
-    state, yhat, status = run_chunk(
-        state,
-        prepared.idx,
-        prepared.w,
-        prepared.y,
-        prepared.accept,
-        prepared.settings,
-        s_out=s,
-    )
-    return Innovations(prepared.y - yhat, s, status, state, estimator, prepared)
+    n = prepared.y.size
+    s = np.empty(n)
+    yhat = np.empty(n)
+    status = np.empty(n, dtype=np.int8)
+    for a in range(0, n, REGRESSOR_BLOCK):
+        z = min(a + REGRESSOR_BLOCK, n)
+        idx, w = prepared.regressor(a, z)
+        state, yhat[a:z], status[a:z] = run_chunk(
+            state, idx, w, prepared.y[a:z], prepared.accept[a:z], prepared.settings, s_out=s[a:z]
+        )
+    np.subtract(prepared.y, yhat, out=yhat)  # e = y − ŷ, in place of ŷ
+    return Innovations(yhat, s, status, state, estimator, prepared)
 
 
 def log_likelihood(e: np.ndarray, s: np.ndarray) -> float:
