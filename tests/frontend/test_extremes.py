@@ -14,7 +14,6 @@ import uuid
 from pathlib import Path
 
 import numpy as np
-import pytest
 from playwright.sync_api import Page, expect
 
 from tests.frontend.browser import shot, wait_run
@@ -145,9 +144,10 @@ def test_compare_scales_robustly_and_gives_each_unit_its_axis(page: Page, api) -
     )
 
 
-@pytest.mark.skipif(NODE is None, reason="Node.js is not installed (apt-get install -y nodejs)")
 def test_error_axes_helpers_under_node() -> None:
-    assert NODE is not None
+    assert NODE is not None, (
+        "Node.js is not installed (apt-get install -y nodejs): these tests run under it"
+    )
     done = subprocess.run(
         [NODE, "--test", str(NODE_TESTS)],
         cwd=NODE_TESTS.parents[3],

@@ -8,15 +8,14 @@ import shutil
 import subprocess
 from pathlib import Path
 
-import pytest
-
 TESTS = Path(__file__).parent / "js" / "grid-math.test.js"
 NODE = shutil.which("node")
 
 
-@pytest.mark.skipif(NODE is None, reason="Node.js is not installed (apt-get install -y nodejs)")
 def test_grid_math_under_node() -> None:
-    assert NODE is not None
+    assert NODE is not None, (
+        "Node.js is not installed (apt-get install -y nodejs): these tests run under it"
+    )
     done = subprocess.run(
         [NODE, "--test", str(TESTS)],
         cwd=TESTS.parents[3],  # the repository: its package.json makes the modules ES modules

@@ -18,9 +18,6 @@ HERE = Path(__file__).parent
 REPO = HERE.parents[1]
 TESTS = HERE / "js" / "map-edit-ops.test.js"
 NODE = shutil.which("node")
-needs_node = pytest.mark.skipif(
-    NODE is None, reason="Node.js is not installed (apt-get install -y nodejs)"
-)
 
 # Reads {shape, values (flat, null for NaN), cells, locked} per case from stdin, prints the
 # edited values of each: toggleLock(locked) then smooth(cells) on a fresh edit.
@@ -64,9 +61,10 @@ def smooth_reference(values: np.ndarray, cells: set[int], locked: set[int]) -> n
     return out
 
 
-@needs_node
 def test_map_edit_ops_under_node() -> None:
-    assert NODE is not None
+    assert NODE is not None, (
+        "Node.js is not installed (apt-get install -y nodejs): these tests run under it"
+    )
     done = subprocess.run(
         [NODE, "--test", str(TESTS)], cwd=REPO, capture_output=True, text=True, timeout=120
     )
@@ -75,9 +73,10 @@ def test_map_edit_ops_under_node() -> None:
     assert "# pass 0" not in done.stdout, done.stdout
 
 
-@needs_node
 def test_smoothing_matches_the_python_reference() -> None:
-    assert NODE is not None
+    assert NODE is not None, (
+        "Node.js is not installed (apt-get install -y nodejs): these tests run under it"
+    )
     rng = np.random.default_rng(18)
     cases = []
     for shape in [(7,), (1,), (5, 6), (1, 4), (8, 9), (3, 4, 5)]:
