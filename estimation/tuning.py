@@ -23,12 +23,22 @@ measured output, ``1.4826·MAD(Δy)/√2`` (the median absolute deviation of the
 difference: white noise of σ has ``std(Δv) = √2 σ``; a smooth signal adds little), σw₀ is
 σv₀/10 and σf₀ is σv₀. The innovation gate is off while tuning, so every setting is scored
 on the same samples.
+
+The joint EKFs (``ekf-def``, ``ekf-aug``, ``ekf-map``; :func:`tune_ekf`) are scored the same
+way on the innovations of their **MAF** updates only (``e_k``, ``S_k`` of
+:func:`estimation.holdout_observers.ekf_innovations`, EKF §3: ``S = H P⁻ Hᵀ + R`` with
+``R = σ_abs² + (σ_rel y)²``); the noise of the other outputs stays as configured. Tuned:
+the MAF's ``sigma_maf_rel`` and ``sigma_maf_abs`` and, for Aug and Map, the random walk of
+their parameters (``sigma_bias``, ``sigma_theta``): with that walk held at its default the
+filter tracks the reading's noise as bias and ℓ is highest at ``R → 0`` (docs/tuning.md#ekf).
+The starts are the config's values.
 """
 
 from __future__ import annotations
 
 import copy
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -37,10 +47,10 @@ import numpy as np
 from estimation.errors import ConfigError
 from estimation.innovation import (
     InnovationStats,
+    innovation_stats,
     log_likelihood,
     map_filter,
     run_innovations,
-    stats_of,
 )
 from estimation.signals import Signals
 
@@ -57,6 +67,15 @@ X_TOLERANCE = 0.01  # in log σ: 1 %
 
 PARAMETERS = ("sigma_w", "sigma_v", "sigma_f")
 """The noise settings tune chooses, where the filter has them (σf: with a sensor model)."""
+EKF_PARAMETERS = {
+    "ekf-def": ("sigma_maf_rel", "sigma_maf_abs"),
+    "ekf-aug": ("sigma_maf_rel", "sigma_maf_abs", "sigma_bias"),
+    "ekf-map": ("sigma_maf_rel", "sigma_maf_abs", "sigma_theta"),
+}
+"""The settings :func:`tune_ekf` chooses per EKF variant (module docstring)."""
+
+Evaluate = Callable[[dict[str, float]], tuple[np.ndarray, np.ndarray]]
+"""One pass at the given settings: the accepted innovations ``e`` and their variances ``S``."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -130,6 +149,67 @@ def tune(
 ) -> TuneResult:
     """Choose the noise settings of map filter ``estimator`` on ``signals`` by maximum
     innovation likelihood (module docstring); ``start`` overrides the log-derived starts."""
+    _check_size(signals, max_evaluations)
+    fields = set(type(map_filter(estimator, config).config).model_fields)
+    names = tunable(config, fields)
+    if not names:
+        raise ConfigError(f"{estimator!r} has no noise settings to tune")
+    starts = {name: _start(name, signals, config, start or {}) for name in names}
+
+    def evaluate(values: dict[str, float]) -> tuple[np.ndarray, np.ndarray]:
+        run = run_innovations(map_filter(estimator, with_settings(config, values)), signals, accept)
+        return run.e[run.accepted], run.s[run.accepted]
+
+    return _maximise(estimator, config, starts, evaluate, max_evaluations, len(signals))
+
+
+def tune_ekf(
+    estimator: str,
+    config: dict[str, Any],
+    signals: Signals,
+    *,
+    accept: np.ndarray | None = None,
+    start: dict[str, float] | None = None,
+    max_evaluations: int = DEFAULT_EVALUATIONS,
+) -> TuneResult:
+    """Choose the MAF noise (and parameter walk) of EKF ``estimator`` on ``signals`` by
+    maximum likelihood of its MAF innovations (module docstring); ``start`` overrides the
+    config's values as starts."""
+    from estimation.holdout_observers import ekf_innovations
+    from estimation.kernels.ekf import Y_MAF
+    from estimation.observers.ekf import EkfObserver
+    from estimation.registry import get_spec
+
+    if estimator not in EKF_PARAMETERS:
+        raise ConfigError(f"{estimator!r} is not an EKF; choose one of {list(EKF_PARAMETERS)}")
+    _check_size(signals, max_evaluations)
+    spec = get_spec(estimator)
+    base = spec.build(config)
+    assert isinstance(base, EkfObserver)
+    if not base.settings.use[Y_MAF]:
+        raise ConfigError(f"{estimator!r} does not feed back the MAF: nothing to tune")
+    full = base.config.model_dump(mode="json")
+    given = start or {}
+    unknown = sorted(set(given) - set(EKF_PARAMETERS[estimator]))
+    if unknown:
+        raise ConfigError(f"{estimator!r} tunes {list(EKF_PARAMETERS[estimator])}, not {unknown}")
+    starts = {
+        name: _positive(name, given.get(name, full[name])) for name in EKF_PARAMETERS[estimator]
+    }
+    model = base.prepare(signals, accept)
+
+    def evaluate(values: dict[str, float]) -> tuple[np.ndarray, np.ndarray]:
+        obs = spec.build(full | values | {"gate_sigma": None})
+        assert isinstance(obs, EkfObserver)
+        run = ekf_innovations(obs.initial_state(model), model, obs.settings, len(signals))
+        e, s = run.e[:, Y_MAF], run.s[:, Y_MAF]
+        ok = np.isfinite(e)
+        return e[ok], s[ok]
+
+    return _maximise(estimator, full, starts, evaluate, max_evaluations, len(signals))
+
+
+def _check_size(signals: Signals, max_evaluations: int) -> None:
     if len(signals) > MAX_SAMPLES:
         raise ConfigError(
             f"the log has {len(signals)} samples; tune takes at most {MAX_SAMPLES} "
@@ -139,14 +219,22 @@ def tune(
         raise ConfigError(
             f"max evaluations must be in [1, {MAX_EVALUATIONS}], got {max_evaluations}"
         )
-    fields = set(type(map_filter(estimator, config).config).model_fields)
-    names = tunable(config, fields)
-    if not names:
-        raise ConfigError(f"{estimator!r} has no noise settings to tune")
-    starts = {name: _start(name, signals, config, start or {}) for name in names}
+
+
+def _maximise(
+    estimator: str,
+    config: dict[str, Any],
+    starts: dict[str, float],
+    evaluate: Evaluate,
+    max_evaluations: int,
+    samples: int,
+) -> TuneResult:
+    """The search of the module docstring over ``x = log σ`` from ``starts``: the grid, then
+    bounded Nelder–Mead from its best point; ``evaluate`` is one filter pass."""
+    names = tuple(starts)
     x0 = np.log(list(starts.values()))
     lower, upper = x0 - SEARCH_DECADES * math.log(10.0), x0 + SEARCH_DECADES * math.log(10.0)
-    search = _Search(estimator, config, signals, accept, names, max_evaluations)
+    search = _Search(evaluate, names, max_evaluations)
 
     best = x0
     for point in _grid(x0):
@@ -172,9 +260,8 @@ def tune(
         )
     x_best = search.best_x
     values = dict(zip(names, (float(v) for v in np.exp(x_best)), strict=True))
-    tuned = with_settings(config, values)
-    final = run_innovations(map_filter(estimator, tuned), signals, accept)
-    stats = stats_of(final)
+    e, s = evaluate(values)
+    stats = innovation_stats(e, s)
     edge = np.isclose(x_best, lower, atol=X_TOLERANCE) | np.isclose(x_best, upper, atol=X_TOLERANCE)
     return TuneResult(
         estimator=estimator,
@@ -183,19 +270,23 @@ def tune(
         log_likelihood=stats.log_likelihood,
         evaluations=search.evaluations,
         max_evaluations=max_evaluations,
-        samples=len(signals),
+        samples=samples,
         stats=stats,
-        config=tuned,
+        config=with_settings(config, values),
         at_bound=tuple(n for n, e in zip(names, edge, strict=True) if e),
     )
 
 
+def _positive(name: str, value: Any) -> float:
+    value = float(value)
+    if not (math.isfinite(value) and value > 0):
+        raise ConfigError(f"the start of {name} must be a positive number, got {value!r}")
+    return value
+
+
 def _start(name: str, signals: Signals, config: dict[str, Any], given: dict[str, float]) -> float:
     if name in given:
-        value = float(given[name])
-        if not (math.isfinite(value) and value > 0):
-            raise ConfigError(f"the start of {name} must be a positive number, got {value!r}")
-        return value
+        return _positive(name, given[name])
     scale = noise_scale(signals[config["output"]])
     if scale <= 0:
         scale = float(np.std(signals[config["output"]])) or 1.0
@@ -213,17 +304,8 @@ class _Search:
     """The objective ``−ℓ/N`` over ``x = log σ``, counting (and caching) filter passes and
     refusing new ones once the budget is spent."""
 
-    def __init__(
-        self,
-        estimator: str,
-        config: dict[str, Any],
-        signals: Signals,
-        accept: np.ndarray | None,
-        names: tuple[str, ...],
-        budget: int,
-    ) -> None:
-        self.estimator, self.config, self.signals = estimator, config, signals
-        self.accept, self.names, self.budget = accept, names, budget
+    def __init__(self, evaluate: Evaluate, names: tuple[str, ...], budget: int) -> None:
+        self.evaluate, self.names, self.budget = evaluate, names, budget
         self.evaluations = 0
         self.cache: dict[tuple[float, ...], float] = {}
         self.best_x = np.zeros(len(names))
@@ -240,15 +322,9 @@ class _Search:
             return math.inf
         self.evaluations += 1
         values = dict(zip(self.names, (float(v) for v in np.exp(key)), strict=True))
-        run = run_innovations(
-            map_filter(self.estimator, with_settings(self.config, values)),
-            self.signals,
-            self.accept,
-        )
-        ok = run.accepted
-        n = int(np.count_nonzero(ok))
-        ll = log_likelihood(run.e[ok], run.s[ok]) if n else -math.inf
-        cost = -ll / n if math.isfinite(ll) else math.inf
+        e, s = self.evaluate(values)
+        ll = log_likelihood(e, s) if e.size else -math.inf
+        cost = -ll / e.size if math.isfinite(ll) else math.inf
         self.cache[key] = cost
         if cost < self.best:
             self.best, self.best_x = cost, np.array(key)

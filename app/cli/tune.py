@@ -1,7 +1,10 @@
-"""``mapwise tune``: choose a map filter's noise settings from a log that has no truth.
+"""``mapwise tune``: choose an estimator's noise settings from a log that has no truth.
 
-It reads the same CSV log and flags as ``mapwise adapt`` and prints one JSON document
-(docs/tuning.md, docs/cli.md)::
+A map filter reads the same CSV log and flags as ``mapwise adapt``; a joint EKF
+(``ekf-def``, ``ekf-aug``, ``ekf-map``) reads a CSV log with the default channel names of
+:class:`~estimation.observers.ekf_config.EkfChannels` and the EKF's default config, or a
+scenario's realisation (``--scenario NAME --seed N [--duration S]``, nominal mismatch) with
+the config drawn for it. It prints one JSON document (docs/tuning.md, docs/cli.md)::
 
     {"estimator", "samples", "parameters": {"sigma_w", "sigma_v"[, "sigma_f"]},
      "start", "log_likelihood", "evaluations", "max_evaluations", "at_bound",
@@ -11,8 +14,10 @@ It reads the same CSV log and flags as ``mapwise adapt`` and prints one JSON doc
                  "adapted": {"rmse", "mae", "max_abs_error"}, "base": {…}, "innovations"},
      "unit", "timing": {"load_s", "tune_s"}}
 
-``parameters`` are standard deviations in the output's unit; the search and its bounds are
-those of :mod:`estimation.tuning`.
+``parameters`` are standard deviations in the output's unit (EKF: ``sigma_maf_rel``,
+``sigma_maf_abs`` [kg/s] and ``sigma_bias`` [kg/s/√s] or ``sigma_theta`` [1/√s]; its
+``holdout`` is :func:`estimation.holdout_observers.ekf_holdout`'s); the search and its
+bounds are those of :mod:`estimation.tuning`.
 """
 
 from __future__ import annotations
@@ -34,28 +39,54 @@ from app.cli.adapt import (
 from app.cli.errors import UsageError
 from estimation.holdout import DEFAULT_FIT_FRACTION, holdout_error
 from estimation.registry import EstimatorKind, names
-from estimation.tuning import DEFAULT_EVALUATIONS, MAX_EVALUATIONS, MAX_SAMPLES, tune
+from estimation.signals import Signals
+from estimation.tuning import (
+    DEFAULT_EVALUATIONS,
+    EKF_PARAMETERS,
+    MAX_EVALUATIONS,
+    MAX_SAMPLES,
+    tune,
+    tune_ekf,
+)
+
+EKF_STARTS = ("sigma_maf_rel", "sigma_maf_abs", "sigma_bias", "sigma_theta")
+"""The EKF's ``--sigma-*`` starts (which of them a variant tunes: ``EKF_PARAMETERS``)."""
+MAP_ONLY = (
+    *("axis", "y", "sigma_w", "sigma_v", "sigma_f", "lag", "delay_s", "delay_samples"),
+    *("p0", "theta0", "limit", "forgetting", "mu", "lock"),
+)
+"""Map-filter flags an EKF refuses."""
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "tune",
-        help="choose σw, σv (σf) of a map filter by maximum innovation likelihood on a log",
-        description="Choose a map filter's noise settings from a CSV log (no truth needed) by "
-        "maximising the innovation log-likelihood; prints a JSON document. --sigma-* give the "
-        f"search's starting point. At most {MAX_SAMPLES} samples and {MAX_EVALUATIONS} "
-        "evaluations.",
+        help="choose a map filter's σw, σv (σf) or an EKF's MAF noise by maximum innovation "
+        "likelihood on a log",
+        description="Choose a map filter's noise settings, or a joint EKF's MAF noise, from a "
+        "CSV log (no truth needed) by maximising the innovation log-likelihood; prints a JSON "
+        "document. --sigma-* give the search's starting point. At most "
+        f"{MAX_SAMPLES} samples and {MAX_EVALUATIONS} evaluations.",
     )
-    p.add_argument("input", type=Path, help="CSV log with a header row")
-    p.add_argument("--estimator", required=True, choices=names(EstimatorKind.MAP_FILTER))
+    p.add_argument("input", type=Path, nargs="?", help="CSV log with a header row")
+    p.add_argument(
+        "--estimator",
+        required=True,
+        choices=names(EstimatorKind.MAP_FILTER) + tuple(EKF_PARAMETERS),
+    )
     p.add_argument(
         "--axis",
         action="append",
-        required=True,
         metavar="NAME=B1,B2,...",
-        help="one per table dimension; NAME is an input column",
+        help="map filters: one per table dimension; NAME is an input column",
     )
-    p.add_argument("--y", required=True, metavar="COLUMN", help="the measured table output")
+    p.add_argument("--y", metavar="COLUMN", help="map filters: the measured table output")
+    p.add_argument("--scenario", help="EKF: tune on this scenario's realisation, not a CSV")
+    p.add_argument("--seed", type=int, help="EKF with --scenario: its seed (default 0)")
+    p.add_argument("--duration", type=float, help="EKF with --scenario: seconds of it")
+    for name in EKF_STARTS:
+        flag = "--" + name.replace("_", "-")
+        p.add_argument(flag, type=float, help=f"EKF: start of {name} (default: the config's)")
     p.add_argument("--sigma-w", type=float, help="start of σw (default: σv's start / 10)")
     p.add_argument("--sigma-v", type=float, help="start of σv (default: the log's noise scale)")
     p.add_argument("--sigma-f", type=float, help="start of σf (default: σv's start)")
@@ -81,6 +112,18 @@ def run_command(args: argparse.Namespace) -> int:
         raise UsageError(f"--max-evals must be in [1, {MAX_EVALUATIONS}], got {args.max_evals}")
     if not 0.0 < args.fraction < 1.0:
         raise UsageError(f"--fraction must be in (0, 1), got {args.fraction:g}")
+    if args.estimator in EKF_PARAMETERS:
+        document = tune_ekf_command(args)
+        print(json.dumps(_finite(document)))
+        return 0
+    wrong = [
+        f for f in ("scenario", "seed", "duration", *EKF_STARTS) if getattr(args, f) is not None
+    ]
+    if wrong:
+        flag = "--" + wrong[0].replace("_", "-")
+        raise UsageError(f"{flag} applies to the EKF estimators, not --estimator {args.estimator}")
+    if args.input is None or not args.axis or args.y is None:
+        raise UsageError("a map filter needs a CSV log, --axis and --y")
     axes = [parse_axis(a) for a in args.axis]
     options: dict[str, Any] = {
         key: getattr(args, key)
@@ -181,3 +224,52 @@ def tune_log(
         "holdout": holdout.to_dict(),
         "timing": {"load_s": load_s, "tune_s": tune_s},
     }
+
+
+def tune_ekf_command(args: argparse.Namespace) -> dict[str, Any]:
+    """``mapwise tune`` of a joint EKF: its log and config, the tuning, the held-out check."""
+    from estimation.holdout_observers import ekf_holdout
+
+    wrong = [f for f in MAP_ONLY if getattr(args, f, None) not in (None, [])]
+    if wrong:
+        flag = "--" + wrong[0].replace("_", "-")
+        raise UsageError(f"{flag} does not apply to --estimator {args.estimator}")
+    if (args.input is None) == (args.scenario is None):
+        raise UsageError("an EKF tunes on a CSV log or on --scenario NAME, one of the two")
+    if args.scenario is None and (args.seed is not None or args.duration is not None):
+        raise UsageError("--seed and --duration go with --scenario")
+    start = {k: getattr(args, k) for k in EKF_STARTS if getattr(args, k) is not None}
+    t0 = time.perf_counter()
+    signals, config = _ekf_log(args)
+    load_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    result = tune_ekf(args.estimator, config, signals, start=start, max_evaluations=args.max_evals)
+    tune_s = time.perf_counter() - t0
+    holdout = ekf_holdout(args.estimator, result.config, signals, fraction=args.fraction)
+    return {
+        **result.to_dict(),
+        "unit": "kg/s",
+        "holdout": holdout.to_dict(),
+        "timing": {"load_s": load_s, "tune_s": tune_s},
+    }
+
+
+def _ekf_log(args: argparse.Namespace) -> tuple[Signals, dict[str, Any]]:
+    """The EKF's log and config: the scenario's realisation (nominal mismatch) with the config
+    drawn for it, or the CSV log's default channels with the default config."""
+    if args.scenario is not None:
+        from estimation.scenarios import get_scenario
+
+        scenario = get_scenario(args.scenario)
+        seed = 0 if args.seed is None else args.seed
+        data = scenario.build(seed=seed, duration_s=args.duration)
+        return data.signals, scenario.default_config(args.estimator, data)
+    from app.io.csv_files import read_csv
+    from estimation.observers.ekf_config import EkfChannels
+
+    rows = _data_rows(args.input)
+    if rows is not None and rows > MAX_SAMPLES:
+        raise UsageError(f"{args.input}: {rows} rows; tune takes at most {MAX_SAMPLES} samples")
+    channels = EkfChannels()
+    log = read_csv(args.input, columns=[*channels.inputs(), channels.maf], time_column=args.time)
+    return log.signals, {}

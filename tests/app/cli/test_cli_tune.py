@@ -146,3 +146,74 @@ def test_a_log_beyond_the_length_limit_exits_2(tmp_path: Path) -> None:
     assert proc.stdout == ""
     assert f"tune takes at most {MAX_SAMPLES} samples" in proc.stderr
     assert proc.stderr.count("\n") == 1
+
+
+# -- the joint EKFs ---------------------------------------------------------------------------
+
+
+def test_tune_an_ekf_on_a_scenario(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, err = run(
+        [
+            "tune", "--estimator", "ekf-aug", "--scenario", "maf-1d-whtc", "--seed", "3",
+            "--duration", "60", "--max-evals", "3", "--sigma-maf-rel", "0.01",
+        ],
+        capsys,
+    )  # fmt: skip
+    assert (code, err) == (0, "")
+    doc = json.loads(out)
+    assert set(doc["parameters"]) == {"sigma_maf_rel", "sigma_maf_abs", "sigma_bias"}
+    assert doc["start"]["sigma_maf_rel"] == 0.01
+    assert doc["evaluations"] == 3
+    assert doc["samples"] == 601
+    assert doc["unit"] == "kg/s"
+    assert doc["holdout"]["fit_samples"] + doc["holdout"]["holdout_samples"] == 601
+    assert math.isfinite(doc["holdout"]["adapted"]["rmse"])
+
+
+@pytest.fixture(scope="module")
+def ekf_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """60 s of ``maf-1d-whtc`` as a CSV with the EKF's default channel names."""
+    s = get_scenario("maf-1d-whtc").build(seed=3, duration_s=60.0).signals
+    names = ["u_egr_pos_pct", "u_vgt_pos_pct", "fuel_mg_per_cycle", "speed_rpm", "maf_kg_s"]
+    rows = ["time," + ",".join(names)]
+    rows += [
+        f"{t:.2f}," + ",".join(f"{v:.8g}" for v in values)
+        for t, *values in zip(s.time, *(s[n] for n in names), strict=True)
+    ]
+    path = tmp_path_factory.mktemp("tune_ekf") / "airpath.csv"
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
+def test_tune_an_ekf_on_a_csv_log(ekf_log: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, err = run(
+        ["tune", str(ekf_log), "--estimator", "ekf-def", "--max-evals", "2"], capsys
+    )
+    assert (code, err) == (0, "")
+    doc = json.loads(out)
+    assert set(doc["parameters"]) == {"sigma_maf_rel", "sigma_maf_abs"}
+    assert doc["start"] == {"sigma_maf_rel": 0.01, "sigma_maf_abs": 2e-4}  # EkfConfig's
+    assert doc["samples"] == 601
+
+
+BAD_EKF_ARGUMENTS = [
+    (["--estimator", "ekf-aug"], "on a CSV log or on --scenario NAME"),
+    (["--estimator", "ekf-aug", "--scenario", "nope"], "nope"),
+    (["--estimator", "ekf-aug", "--scenario", "maf-1d-whtc", "--axis", "u=0,1"], "--axis"),
+    (["--estimator", "ekf-def", "--scenario", "maf-1d-whtc", "--sigma-bias", "1e-3"], "not"),
+    (["--estimator", "ekf-aug", "--scenario", "maf-1d-whtc", "--duration", "-5"], "duration"),
+    (["--estimator", "kf", "--scenario", "maf-1d-whtc"], "applies to the EKF"),
+    (["--estimator", "ekf-aug", "--seed", "3"], "on a CSV log or on --scenario"),
+]
+
+
+@pytest.mark.parametrize(("args", "message"), BAD_EKF_ARGUMENTS)
+def test_bad_ekf_arguments_exit_2_with_one_line(
+    args: list[str], message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    code, out, err = run(["tune", *args, "--max-evals", "1"], capsys)
+    assert code == 2
+    assert out == ""
+    assert err.count("\n") == 1
+    assert err.startswith("mapwise: error: ")
+    assert message in err
