@@ -156,12 +156,16 @@ def logged_maf_sigma_rel(data: ScenarioData) -> float:
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("scenario_name", ["maf-1d-whtc", "maf-whtc"])
 @pytest.mark.parametrize("seed", [100, 101, 102])
-def test_tune_ekf_aug_lands_within_two_of_the_logged_maf_sigma(seed: int) -> None:
-    """ekf-aug on maf-1d-whtc under nominal mismatch, held-out seeds, σ_rel started at the
-    single reading's 1 % (3.2× the logged σ: the averaging forgotten). Measured: 1.78, 2.71,
-    2.44 ·10⁻³ against 3.16·10⁻³ (docs/tuning.md#ekf); 25–60 s a seed."""
-    scenario = get_scenario("maf-1d-whtc")
+def test_tune_ekf_aug_lands_within_two_of_the_logged_maf_sigma(
+    scenario_name: str, seed: int
+) -> None:
+    """ekf-aug under nominal mismatch, held-out seeds, σ_rel started at the single reading's
+    1 % (3.2× the logged σ: the averaging forgotten). Measured against 3.16·10⁻³:
+    maf-1d-whtc 1.78, 2.71, 2.44 ·10⁻³; maf-whtc 2.57, 2.81, 2.75 ·10⁻³
+    (docs/tuning.md#ekf); 15–20 s a case alone, up to 60 s beside another job."""
+    scenario = get_scenario(scenario_name)
     data = scenario.build(seed=seed, duration_s=EKF_SECONDS, mismatch="nominal")
     truth = logged_maf_sigma_rel(data)
     assert truth == pytest.approx(0.01 / math.sqrt(10.0))
