@@ -295,3 +295,38 @@ def test_sparse_csv_export_upload(client: TestClient, tmp_path) -> None:  # type
     # the pole's written -inf: masked samples, counted (docs/data-formats.md#multi-rate)
     assert doc["masked"] == {POLE: 10}
     assert any(f"{POLE!r}: 10 of {T10.size} samples masked" in n for n in doc["notes"])
+
+
+def test_a_dead_channel_is_dropped_and_a_run_that_needs_it_is_refused(
+    client: TestClient, tmp_path
+) -> None:  # type: ignore[no-untyped-def]
+    """A channel with no usable sample never refuses the file: it is dropped with a note.
+    Only a run that needs it is refused, naming the channel and the role it was given for."""
+    from asammdf import MDF, Signal
+
+    mdf = MDF(version="4.10")
+    t = np.arange(200) * 0.01
+    mdf.append(
+        [
+            Signal(np.linspace(0.0, 10.0, 200), t, name="u1"),
+            Signal(np.sin(t), t, name="y"),
+            Signal(np.full(200, np.inf), t, name="dead"),
+        ]
+    )
+    path = tmp_path / "dead.mf4"
+    mdf.save(path, overwrite=True)
+    mdf.close()
+    response = upload(client, path.read_bytes(), name="dead.mf4")
+    assert response.status_code == 201, response.text
+    dataset = response.json()
+    assert [c["name"] for c in dataset["channels"]] == ["u1", "y"]
+    assert any("'dead' dropped: 0 usable samples of 200" in n for n in dataset["notes"])
+    table = {"axes": [{"name": "u1", "breakpoints": [0.0, 5.0, 10.0]}]}
+    body = {"dataset_id": dataset["id"], "estimator": "nlms", "table": table}
+    ok = client.post("/api/runs", json=body | {"signals": {"y": "y"}})
+    assert ok.status_code == 201, ok.text
+    refused = client.post("/api/runs", json=body | {"signals": {"y": "dead"}})
+    assert refused.status_code == 422, refused.text
+    error = refused.json()["error"]
+    assert error["field"] == "signals.y", error
+    assert "dead" in error["message"], error
