@@ -80,6 +80,8 @@ LONGEST: dict[str, float] = {
     "tests/estimation/test_lpv.py": 140,  # 520 before one BLAS thread: its CPU fell 4×
     "tests/app/runs/test_attempts_on_servers.py": 110,  # per test
     "tests/frontend/test_every_estimator_others.py": 100,
+    # 2026-12-04 fresh clone, nothing else running: six held-out EKF tunings of 33-45 s
+    "tests/estimation/test_tuning.py": 290,  # per test
 }
 # Each test starts its own server and the module keeps no fixture or cache: the kill storm
 # (two tests of 50 kills, about half the file's time each), the isolation tests, and the
@@ -87,6 +89,7 @@ LONGEST: dict[str, float] = {
 # test_attempts.py, whose shared-server tests stay one unit each).
 EACH_TEST_ALONE = frozenset(
     {
+        "tests/estimation/test_tuning.py",  # CPU-bound tunings, a module fixture of 60 s data
         "tests/app/runs/test_kill_storm.py",
         "tests/app/runs/test_isolation.py",
         "tests/app/runs/test_server_lifecycle.py",
