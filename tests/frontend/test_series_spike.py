@@ -7,12 +7,11 @@ by a stride, which would keep one sample in five here and lose it."""
 
 from __future__ import annotations
 
-import io
-
 import numpy as np
 from playwright.sync_api import Page, expect
 
 from tests.frontend.browser import plot_data, wait_run
+from tests.support.helpers import spiky_log
 
 N = 20_000  # five samples per bucket of the run view's 4000 points
 SPIKE_AT = 12_347
@@ -28,29 +27,10 @@ TABLE = {
 }
 
 
-def spiky_log() -> bytes:
-    """``u1 [rpm], u2 [mg/stroke], y [ppm]`` at 100 Hz: y is 1…5 ppm plus 0.01 ppm noise,
-    except one sample of 64.7 ppm."""
-    rng = np.random.default_rng(3)
-    u = np.column_stack([rng.uniform(400, 3600, N), rng.uniform(-5, 65, N)])
-    y = 1.0 + u[:, 0] / 1000.0 + rng.normal(0.0, 0.01, N)
-    y[SPIKE_AT] = SPIKE
-    out = io.StringIO()
-    np.savetxt(
-        out,
-        np.column_stack([np.arange(N) / 100.0, u, y]),
-        fmt=["%.2f", "%.1f", "%.2f", "%.4f"],
-        delimiter=",",
-        header="time [s],u1 [rpm],u2 [mg/stroke],y [ppm]",
-        comments="",
-    )
-    return out.getvalue().encode()
-
-
 def test_the_run_view_plot_keeps_a_single_sample_spike(page: Page, api) -> None:
     up = api.post(
         "/api/datasets",
-        files={"file": ("spike.csv", spiky_log(), "text/csv")},
+        files={"file": ("spike.csv", spiky_log(N, SPIKE_AT, SPIKE, 100.0).encode(), "text/csv")},
         data={"name": "one spike"},
     )
     assert up.status_code == 201, up.text

@@ -3,6 +3,8 @@ request builders themselves live in :mod:`tests.support.server`, shared with ``s
 
 from __future__ import annotations
 
+import io
+import math
 import time
 from pathlib import Path
 from typing import Any
@@ -20,6 +22,26 @@ TRUE_MAP = Table(
     [Axis("u1", "rpm", U1), Axis("u2", "mg/stroke", U2)],
     np.add.outer(np.array([1.0, 2.0, 3.5, 3.0]), np.array([0.0, 0.5, 1.5, 1.0])),
 )
+
+
+def spiky_log(n: int, spike_at: int, spike: float, rate_hz: float) -> str:
+    """``u1 [rpm], u2 [mg/stroke], y [ppm]`` at ``rate_hz``: y is 1…5 ppm plus 0.01 ppm
+    noise, except the one sample ``spike_at`` of ``spike`` ppm (the logs of the tests that
+    a decimated series keeps its extremes)."""
+    rng = np.random.default_rng(3)
+    u = np.column_stack([rng.uniform(400, 3600, n), rng.uniform(-5, 65, n)])
+    y = 1.0 + u[:, 0] / 1000.0 + rng.normal(0.0, 0.01, n)
+    y[spike_at] = spike
+    out = io.StringIO()
+    np.savetxt(
+        out,
+        np.column_stack([np.arange(n) / rate_hz, u, y]),
+        fmt=[f"%.{math.ceil(math.log10(rate_hz))}f", "%.1f", "%.2f", "%.4f"],
+        delimiter=",",
+        header="time [s],u1 [rpm],u2 [mg/stroke],y [ppm]",
+        comments="",
+    )
+    return out.getvalue()
 
 
 def log_csv(n: int = 3000, seed: int = 0, rate_hz: float = 50.0) -> str:

@@ -6,12 +6,10 @@ it (min/max per bucket, not a stride)."""
 
 from __future__ import annotations
 
-import io
-
 import numpy as np
 from fastapi.testclient import TestClient
 
-from tests.support.helpers import start_run, upload_ok, wait_run
+from tests.support.helpers import spiky_log, start_run, upload_ok, wait_run
 from tests.support.server import run_body
 
 N = 200_000
@@ -19,27 +17,8 @@ SPIKE_AT = 123_457
 SPIKE = 64.7
 
 
-def spiky_log() -> str:
-    """``u1 [rpm], u2 [mg/stroke], y [ppm]`` at 1 kHz: y is 1…5 ppm plus 0.01 ppm noise,
-    except one sample of 64.7 ppm."""
-    rng = np.random.default_rng(3)
-    u = np.column_stack([rng.uniform(400, 3600, N), rng.uniform(-5, 65, N)])
-    y = 1.0 + u[:, 0] / 1000.0 + rng.normal(0.0, 0.01, N)
-    y[SPIKE_AT] = SPIKE
-    out = io.StringIO()
-    np.savetxt(
-        out,
-        np.column_stack([np.arange(N) / 1000.0, u, y]),
-        fmt=["%.3f", "%.1f", "%.2f", "%.4f"],  # 64.7 and the rest exact enough
-        delimiter=",",
-        header="time [s],u1 [rpm],u2 [mg/stroke],y [ppm]",
-        comments="",
-    )
-    return out.getvalue()
-
-
 def test_a_single_sample_spike_reaches_every_plot(client: TestClient) -> None:
-    dataset = upload_ok(client, spiky_log())
+    dataset = upload_ok(client, spiky_log(N, SPIKE_AT, SPIKE, 1000.0))
     done = wait_run(client, start_run(client, run_body(dataset["id"], "kf"))["id"], timeout=300)
     assert done["status"] == "succeeded", done["error"]
 
