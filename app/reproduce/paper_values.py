@@ -1,9 +1,8 @@
 """What the four papers publish, as constants, each with its table/figure reference.
 
 Only the papers' numbers and claims live here; every number of ours is computed live by
-``mapwise reproduce``. Papers (``../shared/papers/``): **SKF** skf-lookup-table-nox.txt,
-**LPV** lpv-adaptive-observer-maf-map.md, **EKF** ekf-map-adaptation.txt, **TQ**
-torque-uio-adaptive-estimation.md.
+``mapwise reproduce``. The papers **SKF**, **LPV**, **EKF** and **TQ** are cited in full in
+docs/algorithms.md#papers.
 """
 
 from __future__ import annotations
