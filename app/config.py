@@ -63,7 +63,18 @@ class Settings(BaseSettings):
         default_factory=list,
         description="Origins allowed by CORS (comma-separated in the env); none by default.",
     )
-    max_upload_mb: float = Field(512.0, gt=0, description="Largest accepted upload, in MiB.")
+    max_upload_mb: float = Field(
+        2048.0,
+        gt=0,
+        description="Largest accepted upload, in MiB. A dense CSV log streams to the store; "
+        "anything else is also held to max_whole_mb.",
+    )
+    max_whole_mb: float = Field(
+        512.0,
+        gt=0,
+        description="Largest upload read whole into memory, in MiB: an MCAP, MDF or "
+        "non-dense CSV log, an A2L or a values file (never more than max_upload_mb).",
+    )
     max_decompressed_mb: float = Field(
         512.0,
         gt=0,
@@ -269,6 +280,10 @@ class Settings(BaseSettings):
     @property
     def max_upload_bytes(self) -> int:
         return int(self.max_upload_mb * 1024 * 1024)
+
+    @property
+    def max_whole_bytes(self) -> int:
+        return int(min(self.max_whole_mb, self.max_upload_mb) * 1024 * 1024)
 
     @property
     def max_decompressed_bytes(self) -> int:

@@ -83,7 +83,7 @@ def read_body(
         end = text.find(_LF[type(text)], pos + BLOCK_CHARS)  # type: ignore[arg-type]
         end = len(text) if end < 0 else end + 1
         block = text[pos:end]
-        got = _arrow_block(block, delimiter, names, active, decimal, allowed_empty)
+        got = arrow_block(block, delimiter, names, active, decimal, allowed_empty)
         if got is None:  # the error path: Python rules, exact values or messages
             numbered = content_lines(_str(block), _line_number(text, pos))
             body = [ln for _, ln in numbered]
@@ -134,7 +134,7 @@ class _Column:
         return self.array
 
 
-def _arrow_block(
+def arrow_block(
     block: str | bytes,
     delimiter: str,
     names: list[str],
@@ -149,7 +149,7 @@ def _arrow_block(
         return None
     if isinstance(block, bytes):  # pure ASCII, handed to pyarrow as is
         if b"#" in block or (b"\r" in block and block.count(b"\r") != block.count(b"\r\n")):
-            return _arrow_block(
+            return arrow_block(
                 block.decode("ascii"), delimiter, names, active, decimal, allowed_empty
             )
         data = block

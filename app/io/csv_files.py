@@ -219,7 +219,23 @@ def parse_sparse_csv(
     return log
 
 
-def _read_table(
+@dataclass(frozen=True, slots=True)
+class CsvHeader:
+    """What the first lines of a CSV say: the columns and their units (after overrides),
+    the delimiter and decimal mark, the time column, the columns to read (name → strict),
+    those where an empty cell is no sample, and where the body starts in the text."""
+
+    names: list[str]
+    units: dict[str, str]
+    delimiter: str
+    decimal: str
+    time_column: str | None
+    must: dict[str, bool]
+    allowed_empty: frozenset[str]
+    body_start: int
+
+
+def read_header(
     text: str | bytes,
     *,
     columns: Sequence[str] | None,
@@ -230,14 +246,10 @@ def _read_table(
     max_header_chars: int | None,
     max_columns: int | None,
     empty_is_missing: bool,
-) -> _Table:
-    """The header, units and numeric columns of CSV ``text`` (the rules of
-    :func:`parse_csv`); with ``empty_is_missing`` an empty data cell is NaN."""
-    if isinstance(text, bytes) and not text.isascii():
-        try:
-            text = text.decode("utf-8-sig")
-        except UnicodeDecodeError as exc:
-            raise LogFormatError(f"not a UTF-8 text file ({exc.reason})", field="file") from None
+) -> CsvHeader:
+    """The header, units row, delimiter and decimal mark of CSV ``text`` (the rules of
+    :func:`parse_csv`), read from its first 22 lines; with ``empty_is_missing`` an empty
+    data cell will be no sample. ``text`` may be just the file's first lines."""
     head = head_lines(text, 22)  # header, units row and the 20 rows sniffed
     lines = [(n, ln) for n, ln, _ in head]
     if not lines:
@@ -307,22 +319,66 @@ def _read_table(
         if name == time_column or wanted is None or name in wanted
     }
     allowed_empty = {n for n in must if n != time_column} if empty_is_missing else set()
+    return CsvHeader(
+        names, unit_of, delimiter, decimal, time_column, must, frozenset(allowed_empty), body_start
+    )
+
+
+def _read_table(
+    text: str | bytes,
+    *,
+    columns: Sequence[str] | None,
+    time_column: str | None,
+    strict: bool,
+    units: Mapping[str, str] | None,
+    decimal: str | None,
+    max_header_chars: int | None,
+    max_columns: int | None,
+    empty_is_missing: bool,
+) -> _Table:
+    """The header, units and numeric columns of CSV ``text`` (the rules of
+    :func:`parse_csv`); with ``empty_is_missing`` an empty data cell is NaN."""
+    if isinstance(text, bytes) and not text.isascii():
+        try:
+            text = text.decode("utf-8-sig")
+        except UnicodeDecodeError as exc:
+            raise LogFormatError(f"not a UTF-8 text file ({exc.reason})", field="file") from None
+    header = read_header(
+        text,
+        columns=columns,
+        time_column=time_column,
+        strict=strict,
+        units=units,
+        decimal=decimal,
+        max_header_chars=max_header_chars,
+        max_columns=max_columns,
+        empty_is_missing=empty_is_missing,
+    )
     from app.io.csv_arrow import read_body  # pyarrow: loaded with the first log read
 
     body = read_body(
         text,
-        body_start,
-        delimiter=delimiter,
-        names=names,
-        must=must,
-        decimal=decimal,
-        allowed_empty=allowed_empty,
+        header.body_start,
+        delimiter=header.delimiter,
+        names=header.names,
+        must=header.must,
+        decimal=header.decimal,
+        allowed_empty=header.allowed_empty,
     )
     values = body.values
+    time_column = header.time_column
     stamps = values.pop(time_column) if time_column is not None else None
     time = stamps if stamps is not None else np.arange(body.rows, dtype=np.float64)
     return _Table(
-        time, values, unit_of, time_column, delimiter, decimal, body.rows, body.line_of, body.masked
+        time,
+        values,
+        header.units,
+        time_column,
+        header.delimiter,
+        header.decimal,
+        body.rows,
+        body.line_of,
+        body.masked,
     )
 
 

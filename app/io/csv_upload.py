@@ -17,7 +17,7 @@ from app.io.csv_files import SparseCsv, parse_sparse_csv
 from app.io.csv_sniff import DELIMITERS, TIME_COLUMNS, split_lines
 from app.io.errors import InputError, unsupported
 
-_BINARY = re.compile(r"[\x00-\x08\x0b\x0e-\x1f\x7f]")
+BINARY = re.compile(r"[\x00-\x08\x0b\x0e-\x1f\x7f]")
 
 
 def read_csv_upload(
@@ -39,12 +39,12 @@ def read_csv_upload(
     except UnicodeDecodeError:
         text = data.decode("latin-1")
         notes.append("decoded as Latin-1 (the file is not valid UTF-8)")
-    match = _BINARY.search(text)
+    match = BINARY.search(text)
     if match:
         raise unsupported(
             f"binary data at byte {match.start()}: not CSV text, and no MCAP or MDF4 magic"
         )
-    _reject_unknown_delimiter(text)
+    reject_unknown_delimiter(text)
     log = parse_sparse_csv(
         text,
         units=units,
@@ -78,7 +78,7 @@ def read_csv_upload(
     return log, notes
 
 
-def _reject_unknown_delimiter(text: str) -> None:
+def reject_unknown_delimiter(text: str) -> None:
     """A header and first row split alike by ``|``, ``:`` or spaces but holding none of
     ``, ; tab`` is a file with an unsupported delimiter."""
     content = []

@@ -13,6 +13,8 @@ series) in the row, for the run metrics.
 from __future__ import annotations
 
 import contextlib
+import io
+import logging
 import os
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any, BinaryIO
@@ -23,8 +25,10 @@ from app.db.engine import Database
 from app.db.repositories import DatasetRepo, RunRepo
 from app.domain import Channel, Dataset, Page, RunStatus
 from app.errors import ConflictError, InvalidRequestError
+from app.io.csv_stream import STREAM_MIN_BYTES, NotDense, StreamedCsv, stream_csv
 from app.io.decimate import finite_or_none, minmax_decimate
-from app.io.ingest import IngestLimits, ParsedLog, ingest
+from app.io.errors import too_large
+from app.io.ingest import IngestLimits, ParsedLog, detect_format, ingest
 from app.io.names import check_name, without_refused
 from app.io.payload import pack_truth
 from app.store import (
@@ -36,7 +40,9 @@ from app.store import (
     save_staged,
     stage_recorded,
     stage_signals,
+    staging_file,
 )
+from app.store.parquet_signals import SignalsWriter
 from estimation.errors import EstimationError
 from estimation.mismatch import MismatchLevel
 from estimation.progress import Progress, reporting
@@ -44,6 +50,7 @@ from estimation.scenarios import get_scenario, scenarios
 from estimation.signals import Signals
 
 NAME_MAX = 200
+log = logging.getLogger("mapwise.datasets")
 
 
 def _dataset_name(name: str | None, filename: str | None, fallback: str) -> str:
@@ -67,6 +74,31 @@ def _timing(parsed: ParsedLog) -> dict[str, tuple[float, float, float]]:
     return timing
 
 
+def _add_streamed(repo: DatasetRepo, name: str, streamed: StreamedCsv) -> Dataset:
+    return repo.add(
+        name=name or "csv upload",
+        source="csv",
+        rows=streamed.rows,
+        rate_hz=streamed.rate_hz,
+        duration_s=streamed.duration_s,
+        time_column=streamed.time_column or "",
+        channels=[Channel(n, u) for n, u in streamed.channels],
+        notes=streamed.notes,
+    )
+
+
+@contextlib.contextmanager
+def _opened(source: BinaryIO | bytes | os.PathLike[str]) -> Iterator[BinaryIO]:
+    """The upload as a file object at its start (a path opened, bytes wrapped)."""
+    if isinstance(source, os.PathLike):
+        with open(source, "rb") as f:
+            yield f
+    elif isinstance(source, bytes | bytearray | memoryview):
+        yield io.BytesIO(source)
+    else:
+        yield source
+
+
 class DatasetService:
     def __init__(self, db: Database, store: ArtifactStore | None = None) -> None:
         self.db = db
@@ -75,21 +107,27 @@ class DatasetService:
     def _store(
         self, signals: Signals | ParsedLog, add: Callable[[DatasetRepo], Dataset]
     ) -> Dataset:
-        """Stage the samples as Parquet, add the row, put the object under the row's id and
-        commit; an object whose row did not commit is removed again."""
+        """Stage the samples as Parquet and store them (:meth:`_store_staged`)."""
         with self._staged(signals) as staged:
-            stored: tuple[int, str] | None = None
-            try:
-                with self.db.write() as s:
-                    repo = DatasetRepo(s)
-                    dataset = add(repo)
-                    stored = (dataset.id, save_staged(self.store, dataset.id, staged))
-                    repo.attach_samples(dataset.id, stored[1], staged.sha256)
-                return dataset
-            except BaseException:
-                if stored is not None:
-                    delete_dataset(self.store, *stored)
-                raise
+            return self._store_staged(staged, add)
+
+    def _store_staged(
+        self, staged: StagedDataset, add: Callable[[DatasetRepo], Dataset]
+    ) -> Dataset:
+        """Add the row, put the staged object under the row's id and commit; an object whose
+        row did not commit is removed again."""
+        stored: tuple[int, str] | None = None
+        try:
+            with self.db.write() as s:
+                repo = DatasetRepo(s)
+                dataset = add(repo)
+                stored = (dataset.id, save_staged(self.store, dataset.id, staged))
+                repo.attach_samples(dataset.id, stored[1], staged.sha256)
+            return dataset
+        except BaseException:
+            if stored is not None:
+                delete_dataset(self.store, *stored)
+            raise
 
     @contextlib.contextmanager
     def _staged(self, samples: Signals | ParsedLog) -> Iterator[StagedDataset]:
@@ -118,6 +156,8 @@ class DatasetService:
         channels: Sequence[str] | None = None,
         raster: str | None = None,
         rate_hz: float | None = None,
+        max_whole_bytes: int | None = None,
+        stream_min_bytes: int = STREAM_MIN_BYTES,
     ) -> Dataset:
         """Parse and validate the whole file first; store it only if it is usable, with
         what ingest said about it: its notes and the masked samples per channel
@@ -128,9 +168,27 @@ class DatasetService:
         (the row's ``rows``, ``rate_hz`` and ``duration_s`` describe the whole-log read, on
         the slowest kept channel's raster); ``rate_hz``: the rows' sample rate of a CSV
         without a time column, which is refused without it (a guessed time base is no time
-        base)."""
+        base).
+
+        A dense CSV of at least ``stream_min_bytes`` without a raster streams into the store
+        (:mod:`app.io.csv_stream`): the process never holds the whole log. Anything else is
+        read whole, and refused (413) over ``max_whole_bytes`` (default ``max_bytes``)."""
         given = _dataset_name(name, filename, "")  # a bad name fails before the file is read
-        limits = IngestLimits(max_bytes=max_bytes, max_decompressed_bytes=max_decompressed_bytes)
+        whole = max_bytes if max_whole_bytes is None else min(max_whole_bytes, max_bytes)
+        if raster is None:
+            streamed = self._upload_streamed(
+                source,
+                given,
+                units=units,
+                channels=channels,
+                rate_hz=rate_hz,
+                max_bytes=max_bytes,
+                max_whole_bytes=whole,
+                min_bytes=stream_min_bytes,
+            )
+            if streamed is not None:
+                return streamed
+        limits = IngestLimits(max_bytes=whole, max_decompressed_bytes=max_decompressed_bytes)
         parsed = ingest(
             source,
             units=units,
@@ -162,6 +220,66 @@ class DatasetService:
                 notes=parsed.notes,
             ),
         )
+
+    def _upload_streamed(
+        self,
+        source: BinaryIO | bytes | os.PathLike[str],
+        given: str,
+        *,
+        units: dict[str, str] | None,
+        channels: Sequence[str] | None,
+        rate_hz: float | None,
+        max_bytes: int,
+        max_whole_bytes: int,
+        min_bytes: int,
+    ) -> Dataset | None:
+        """The dataset of a dense CSV streamed into the store; ``None`` (the file rewound)
+        when the upload is to be read whole. 413 for a file over ``max_bytes``, or over
+        ``max_whole_bytes`` that cannot stream (saying why)."""
+        with _opened(source) as file:
+            size = file.seek(0, io.SEEK_END)
+            file.seek(0)
+            if size > max_bytes:
+                raise too_large(f"file is {size} bytes, the limit is {max_bytes} bytes")
+            if size < min_bytes:
+                return None
+            head = file.read(4096)
+            file.seek(0)
+            kind = detect_format(head)
+            if kind != "csv":
+                if size > max_whole_bytes:
+                    raise too_large(
+                        f"file is {size} bytes; an {kind.upper()} log is read whole, which is "
+                        f"limited to {max_whole_bytes} bytes (MAPWISE_MAX_WHOLE_MB); only a "
+                        "dense CSV streams"
+                    )
+                return None
+            limits = IngestLimits()
+            with staging_file(self.store) as path:
+                try:
+                    streamed = stream_csv(
+                        file,
+                        lambda channels: SignalsWriter(path, channels),
+                        units=units,
+                        time_column=None,
+                        channels=channels,
+                        rate_hz=rate_hz,
+                        max_header_bytes=limits.max_header_bytes,
+                        max_channels=limits.max_channels,
+                        min_samples=limits.min_samples,
+                    )
+                except NotDense as why:
+                    file.seek(0)
+                    if size > max_whole_bytes:
+                        raise too_large(
+                            f"file is {size} bytes and cannot stream ({why}): a CSV is "
+                            f"read whole then, which is limited to {max_whole_bytes} bytes "
+                            "(MAPWISE_MAX_WHOLE_MB)"
+                        ) from None
+                    log.info("upload read whole: %s", why)
+                    return None
+                staged = StagedDataset(path, streamed.sha256)
+                return self._store_staged(staged, lambda repo: _add_streamed(repo, given, streamed))
 
     def simulate(
         self,

@@ -115,10 +115,10 @@ class EcuService:
             return Uploaded(EcuRepo(s).set_values(ecu_id, values_format=fmt, values=values), notes)
 
     def _check_size(self, data: bytes, field: str) -> None:
-        if len(data) > self.settings.max_upload_bytes:
+        if len(data) > self.settings.max_whole_bytes:
             raise too_large(
                 f"the {field} file has {len(data):,} bytes, more than the limit of "
-                f"{self.settings.max_upload_bytes:,} (MAPWISE_MAX_UPLOAD_MB)",
+                f"{self.settings.max_whole_bytes:,} (MAPWISE_MAX_WHOLE_MB)",
                 field=field,
             )
 

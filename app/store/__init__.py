@@ -18,6 +18,7 @@ from app.store.datasets import (
     stage_columns,
     stage_recorded,
     stage_signals,
+    staging_file,
 )
 from app.store.errors import ArtifactCorruptError, ArtifactError, ArtifactMissingError
 from app.store.location import DEFAULT_STORE_URL, default_store_url, resolve_store_url
@@ -44,4 +45,5 @@ __all__ = [
     "stage_columns",
     "stage_recorded",
     "stage_signals",
+    "staging_file",
 ]

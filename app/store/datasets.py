@@ -64,7 +64,7 @@ def dataset_key(dataset_id: int, sha256: str) -> str:
 def stage_signals(store: ArtifactStore, signals: Signals) -> Iterator[StagedDataset]:
     """Write ``signals`` as Parquet to a temporary file (removed on exit unless stored)."""
     channels = [Column(n, signals.units.get(n, ""), signals[n]) for n in signals.names]
-    with _staging_file(store) as path:
+    with staging_file(store) as path:
         yield StagedDataset(path, write_columns(path, signals.time, channels))
 
 
@@ -78,7 +78,7 @@ def stage_recorded(
     pairs = [
         (Column(t.name, units.get(t.name, t.unit), t.values, hold=t.hold), t.time) for t in tracks
     ]
-    with _staging_file(store) as path:
+    with staging_file(store) as path:
         yield StagedDataset(path, write_recorded(path, pairs))
 
 
@@ -87,12 +87,12 @@ def stage_columns(
     store: ArtifactStore, time: np.ndarray, channels: Sequence[Column]
 ) -> Iterator[StagedDataset]:
     """:func:`stage_signals` for raw arrays (the migration of npz payloads)."""
-    with _staging_file(store) as path:
+    with staging_file(store) as path:
         yield StagedDataset(path, write_columns(path, time, channels))
 
 
 @contextlib.contextmanager
-def _staging_file(store: ArtifactStore) -> Iterator[Path]:
+def staging_file(store: ArtifactStore) -> Iterator[Path]:
     fd, name = tempfile.mkstemp(prefix=".dataset-", suffix=".parquet", dir=store.staging_dir())
     os.close(fd)
     path = Path(name)

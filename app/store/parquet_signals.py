@@ -53,24 +53,64 @@ def _time_field_name(channels: Sequence[Column]) -> str:
     return name
 
 
+class SignalsWriter:
+    """A dense file written block by block (:func:`write_columns` in one go, a streamed
+    upload as it is parsed): blocks of any length are cut into row groups of exactly
+    :data:`ROW_GROUP_ROWS` rows, so the file does not depend on how its rows arrived, and
+    the row count is put in the metadata when the file is closed (:meth:`close`)."""
+
+    def __init__(self, path: str | os.PathLike[str], channels: Sequence[tuple[str, str]]):
+        self.path = path
+        time_name = _time_field_name([Column(n, u, np.empty(0)) for n, u in channels])
+        fields = [_field(time_name, "s", "time")] + [_field(n, u, "channel") for n, u in channels]
+        self.meta = {"format": FORMAT, "time": time_name}
+        self.schema = pa.schema(fields, metadata={SCHEMA_KEY: json.dumps(self.meta).encode()})
+        self.writer = pq.ParquetWriter(path, self.schema, compression="zstd", use_dictionary=False)
+        self.pending: list[list[np.ndarray]] = []  # blocks not yet in a row group
+        self.buffered = 0
+        self.rows = 0
+
+    def write(self, time: np.ndarray, values: Sequence[np.ndarray]) -> None:
+        """Append rows: their time and each channel's values, in the channels' order."""
+        arrays = [np.ascontiguousarray(a, dtype=np.float64) for a in (time, *values)]
+        self.pending.append(arrays)
+        self.buffered += time.size
+        while self.buffered >= ROW_GROUP_ROWS:
+            self._flush(ROW_GROUP_ROWS)
+
+    def close(self) -> str:
+        """Write the last rows and the row count; the SHA-256 (hex) of the file's bytes."""
+        if self.buffered or not self.rows:
+            self._flush(self.buffered)
+        self.writer.add_key_value_metadata(
+            {SCHEMA_KEY: json.dumps(self.meta | {"rows": self.rows})}
+        )
+        self.writer.close()
+        return file_sha256(self.path)
+
+    def abort(self) -> None:
+        self.writer.close()
+
+    def _flush(self, rows: int) -> None:
+        joined = [np.concatenate(parts) for parts in zip(*self.pending, strict=True)]
+        if not joined:  # an empty file: one empty row group, as before
+            joined = [np.empty(0) for _ in self.schema]
+        batch = pa.record_batch([pa.array(a[:rows]) for a in joined], schema=self.schema)
+        self.writer.write_batch(batch, row_group_size=ROW_GROUP_ROWS)
+        self.pending = [[a[rows:] for a in joined]] if joined[0].size > rows else []
+        self.buffered -= rows
+        self.rows += rows
+
+
 def write_columns(
     path: str | os.PathLike[str], time: np.ndarray, channels: Sequence[Column]
 ) -> str:
     """Write the file at ``path``; returns the SHA-256 (hex) of its bytes."""
-    time_name = _time_field_name(channels)
-    fields = [_field(time_name, "s", "time")] + [
-        _field(c.name, c.unit, "channel") for c in channels
-    ]
-    meta = {"format": FORMAT, "time": time_name, "rows": int(time.size)}
-    schema = pa.schema(fields, metadata={SCHEMA_KEY: json.dumps(meta).encode()})
-    arrays = [np.ascontiguousarray(time, dtype=np.float64)]
-    arrays += [np.ascontiguousarray(c.values, dtype=np.float64) for c in channels]
-    with pq.ParquetWriter(path, schema, compression="zstd", use_dictionary=False) as writer:
-        for start in range(0, max(1, time.size), ROW_GROUP_ROWS):
-            stop = start + ROW_GROUP_ROWS
-            batch = pa.record_batch([pa.array(a[start:stop]) for a in arrays], schema=schema)
-            writer.write_batch(batch, row_group_size=ROW_GROUP_ROWS)
-    return file_sha256(path)
+    writer = SignalsWriter(path, [(c.name, c.unit) for c in channels])
+    for start in range(0, time.size, ROW_GROUP_ROWS):
+        stop = start + ROW_GROUP_ROWS
+        writer.write(time[start:stop], [c.values[start:stop] for c in channels])
+    return writer.close()
 
 
 def write_recorded(
@@ -145,7 +185,9 @@ class SignalsFile:
             source = pa.BufferReader(source)
         reader = pq.ParquetFile(source, pre_buffer=False)
         schema = reader.schema_arrow
-        meta = json.loads((schema.metadata or {}).get(SCHEMA_KEY, b"{}"))
+        # the file's key-value metadata: the schema's, or what a streamed writer put there
+        # when it closed (the row count), which replaces it
+        meta = json.loads((reader.metadata.metadata or {}).get(SCHEMA_KEY, b"{}"))
         if meta.get("format") != FORMAT or schema.names[:1] != [meta.get("time")]:
             raise ValueError(f"not a {FORMAT} file (schema metadata {meta})")
         if reader.metadata.num_rows != meta["rows"]:

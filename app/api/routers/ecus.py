@@ -59,7 +59,7 @@ def upload_ecu(
 ) -> EcuOut:
     """Upload an A2L and, optionally, the ECU's values. Both are checked before anything is
     stored; names in a DCM or CDFX that the A2L lacks come back as ``notes``."""
-    limit = services.settings.max_upload_bytes
+    limit = services.settings.max_whole_bytes
     a2l_data = _read(a2l, "a2l", limit)
     values_data = None if values is None else _read(values, "values", limit)
     uploaded = services.ecus.upload(a2l_data, values=values_data, name=name, filename=a2l.filename)
@@ -97,7 +97,7 @@ def put_values(
 ) -> EcuOut:
     """Replace the ECU's values file (checked against its A2L first)."""
     services.ecus.get(ecu_id)
-    data = _read(values, "values", services.settings.max_upload_bytes)
+    data = _read(values, "values", services.settings.max_whole_bytes)
     return EcuOut.uploaded(services.ecus.set_values(ecu_id, data))
 
 
