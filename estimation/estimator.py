@@ -137,6 +137,14 @@ class ChunkedEstimator(ABC, Generic[S, P]):
     def times(self, prepared: P) -> np.ndarray:
         """The log's sample times [s]."""
 
+    def n_samples(self, prepared: P) -> int:
+        """Log samples in the whole log (a prepared window is part of it)."""
+        return int(self.times(prepared).size)
+
+    def time_of(self, prepared: P, sample: int) -> float:
+        """The time [s] of the last of the first ``sample`` log samples (of the first, at 0)."""
+        return float(self.times(prepared)[max(sample - 1, 0)])
+
     def log_sample(self, step: int, prepared: P) -> int:
         """Log samples accounted for after ``step`` kernel steps (more when a step pairs a
         measurement with an earlier operating point)."""
@@ -151,14 +159,13 @@ class ChunkedEstimator(ABC, Generic[S, P]):
         self, state: S, prepared: P, start: int, outputs: dict[str, np.ndarray], status: Any
     ) -> Snapshot:
         """The report after the chunk that began at step ``start`` and ended at ``state``."""
-        time = self.times(prepared)
         first = self.log_sample(start, prepared)
         sample = self.log_sample(state.step, prepared)
         return Snapshot(
             estimator=self.name,
             sample=sample,
-            n_samples=int(time.size),
-            time_s=float(time[max(sample - 1, 0)]),
+            n_samples=self.n_samples(prepared),
+            time_s=self.time_of(prepared, sample),
             state=state,
             chunk_start=first,
             status=status,

@@ -3,6 +3,7 @@ and their registry specs."""
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
@@ -10,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from estimation.errors import ConfigError, ShapeError
-from estimation.estimator import Chunk, ChunkedEstimator
+from estimation.estimator import Chunk, ChunkedEstimator, Snapshot
 from estimation.filters.config import (
     KfConfig,
     NlmsConfig,
@@ -37,6 +38,10 @@ REJECTION_REASONS = ("mask", "innovation", "delay")
 #: which on a VM costs more than the kernel itself.
 REGRESSOR_BLOCK = 1 << 16
 
+#: Kernel steps a window of :meth:`TableFilter.run_windows` holds (rounded to whole chunks):
+#: its rows are the most of the log a streamed run has in memory at once.
+WINDOW_STEPS = 1 << 18
+
 
 @dataclass(frozen=True, eq=False)
 class Prepared:
@@ -52,6 +57,8 @@ class Prepared:
     time_s: np.ndarray
     measured: np.ndarray  # the output channel over the whole log, for residuals
     settings: FilterSettings
+    offset: int = 0  # a window of a longer log: its first step's (and row's) index in it
+    total: int = 0  # that log's samples (0: this is the whole log)
 
     def regressor(self, start: int = 0, stop: int | None = None) -> tuple[np.ndarray, np.ndarray]:
         """``(idx, w)`` of steps ``start:stop`` (:meth:`Grid.regressor`)."""
@@ -97,19 +104,26 @@ class TableFilter(ChunkedEstimator[FilterState, Prepared]):
     def output_names(self) -> tuple[str, ...]:
         return ("prediction", "residual")
 
-    def prepare(self, signals: Signals, accept: np.ndarray | None = None) -> Prepared:
-        """Regressor, aligned measurements and settings for a whole log.
+    def prepare(
+        self,
+        signals: Signals,
+        accept: np.ndarray | None = None,
+        *,
+        window: tuple[int, int, FilterSettings] | None = None,
+    ) -> Prepared:
+        """Regressor, aligned measurements and settings for a whole log, or with ``window =
+        (offset, total, settings)`` for rows ``offset …`` of a log of ``total`` samples whose
+        settings are resolved (:meth:`run_windows`).
 
         With a sensor delay of τ samples, kernel step ``i`` pairs the measurement ``y[i+τ]``
         with the operating point ``u[i]`` and is accepted only if both samples are.
         """
         signals.require(self.required_signals())
-        sensor = getattr(self.config, "sensor", None)
-        needs_period = sensor is not None and sensor.delay_samples is None and sensor.delay_s
-        if needs_period and len(signals) < 2:
-            raise ConfigError("sensor.delay_s needs at least two samples to know the rate")
-        period = signals.sample_period() if needs_period else None
-        settings = resolve_settings(self.config, self.grid, sample_period_s=period)
+        offset, total = 0, 0
+        if window is None:
+            settings = self.settings_for(signals)
+        else:
+            offset, total, settings = window
         n = len(signals)
         tau = settings.delay
         if tau >= n:
@@ -125,14 +139,81 @@ class TableFilter(ChunkedEstimator[FilterState, Prepared]):
             time_s=signals.time,
             measured=signals[self.config.output],
             settings=settings,
+            offset=offset,
+            total=total,
         )
+
+    def settings_for(self, signals: Signals) -> FilterSettings:
+        """The kernel settings on a log: a delay in seconds needs its sample period."""
+        sensor = getattr(self.config, "sensor", None)
+        needs_period = sensor is not None and sensor.delay_samples is None and sensor.delay_s
+        if needs_period and len(signals) < 2:
+            raise ConfigError("sensor.delay_s needs at least two samples to know the rate")
+        period = signals.sample_period() if needs_period else None
+        return resolve_settings(self.config, self.grid, sample_period_s=period)
+
+    def run_windows(
+        self,
+        read: Callable[[int, int], Signals],
+        n: int,
+        *,
+        every: int,
+        state: FilterState | None = None,
+        window: int = WINDOW_STEPS,
+    ) -> Iterator[Snapshot]:
+        """:meth:`run` over a log of ``n`` samples that is never held whole.
+
+        ``read(a, z)`` gives the log's rows ``a … z−1`` (its time and the channels the filter
+        reads). The filter reads ``window`` kernel steps at a time, rounded up to whole chunks
+        of ``every`` steps counted from where the run starts, each window with the τ rows
+        after it that its last measurements need (sensor delay). The kernel carries its state
+        across windows as across chunks, so snapshots, states and outputs are :meth:`run`'s
+        bit for bit (``tests/estimation/test_run_windows.py``). Each window resolves the
+        settings on its own rows (a delay in seconds needs its sample period); a delay that
+        comes out different along the log is a :class:`ConfigError`, as a varying sample
+        period is for :meth:`run`.
+        """
+        chunk = int(every)
+        if chunk < 1:
+            raise ConfigError(f"every must be >= 1 sample, got {every}")
+        settings = self.settings_for(read(0, min(n, window)))
+        tau = settings.delay
+        if tau >= n:
+            raise ConfigError(f"sensor delay of {tau} samples is not shorter than the log ({n})")
+        steps = n - tau
+        span = max(1, -(-window // chunk)) * chunk
+
+        def prepared(a: int, z: int) -> Prepared:
+            rows = read(a, min(z + tau, n))
+            own = self.settings_for(rows)
+            if own.delay != tau:
+                raise ConfigError(
+                    f"the sensor delay is {own.delay} samples from row {a} on, {tau} before: "
+                    "the log's sample period changes"
+                )
+            return self.prepare(rows, window=(a, n, settings))
+
+        if state is None:
+            state = self.initial_state(prepared(0, min(span, steps)))
+        self.check_state(state, steps)
+        if state.step == steps:
+            last = prepared(max(steps - 1, 0), steps)
+            yield self.snapshot(state, last, steps, {}, np.empty(0, np.int8))
+            return
+        while state.step < steps:
+            part = prepared(state.step, min(state.step + span, steps))
+            end = self.steps(part)
+            while state.step < end:
+                start = state.step
+                state, outputs, status = self.advance(state, part, min(start + chunk, end))
+                yield self.snapshot(state, part, start, outputs, status)
 
     def initial_state(self, prepared: Prepared) -> FilterState:
         y_m0 = float(prepared.y[0]) if prepared.settings.has_sensor else None
         return initial_state(self.name, self.theta0.flat, prepared.settings, y_m0=y_m0)
 
     def steps(self, prepared: Prepared) -> int:
-        return int(prepared.y.size)
+        return prepared.offset + int(prepared.y.size)
 
     def start(self, signals: Signals, prepared: Prepared) -> FilterState:
         return self.initial_state(prepared)
@@ -147,11 +228,17 @@ class TableFilter(ChunkedEstimator[FilterState, Prepared]):
         tau = prepared.settings.delay
         yhat = np.empty(stop - start)
         status = np.empty(stop - start, dtype=np.int8)
+        off = prepared.offset  # steps a..z of the log are a−off..z−off of a window
         for a in range(start, stop, REGRESSOR_BLOCK):
             z = min(a + REGRESSOR_BLOCK, stop)
-            idx, w = prepared.regressor(a, z)
+            idx, w = prepared.regressor(a - off, z - off)
             state, yhat[a - start : z - start], status[a - start : z - start] = run_chunk(
-                state, idx, w, prepared.y[a:z], prepared.accept[a:z], prepared.settings
+                state,
+                idx,
+                w,
+                prepared.y[a - off : z - off],
+                prepared.accept[a - off : z - off],
+                prepared.settings,
             )
         if start == 0 and tau:
             yhat = np.concatenate([np.full(tau, np.nan), yhat])
@@ -160,6 +247,12 @@ class TableFilter(ChunkedEstimator[FilterState, Prepared]):
 
     def times(self, prepared: Prepared) -> np.ndarray:
         return prepared.time_s
+
+    def n_samples(self, prepared: Prepared) -> int:
+        return prepared.total or int(prepared.time_s.size)
+
+    def time_of(self, prepared: Prepared, sample: int) -> float:
+        return float(prepared.time_s[max(sample - 1, 0) - prepared.offset])
 
     def log_sample(self, step: int, prepared: Prepared) -> int:
         return step + prepared.settings.delay if step else 0
@@ -172,7 +265,10 @@ class TableFilter(ChunkedEstimator[FilterState, Prepared]):
             "variance": None if var is None else var.reshape(self.grid.shape),
             "outputs": {
                 "prediction": yhat,
-                "residual": prepared.measured[chunk.first : chunk.sample] - yhat,
+                "residual": prepared.measured[
+                    chunk.first - prepared.offset : chunk.sample - prepared.offset
+                ]
+                - yhat,
             },
             "rejected": {
                 "mask": state.rejected_mask,

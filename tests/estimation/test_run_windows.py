@@ -1,0 +1,129 @@
+"""A map filter run a window of the log at a time is the whole-log run, bit for bit.
+
+:meth:`TableFilter.run_windows` reads the log through ``read(a, z)`` (here: slices of the
+same log, each read recorded) and must yield the snapshots of :meth:`TableFilter.run` —
+samples, times, outputs, status codes, maps, variances, states — for every filter, with
+and without a sensor delay, from the start and resumed, and never read more than a window
+plus the delay's rows at once.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from estimation.errors import ConfigError, SignalError
+from estimation.estimator import Snapshot
+from estimation.filters.estimator import TableFilter
+from estimation.registry import get_spec
+from estimation.signals import Signals
+from tests.factories import KINDS, SENSOR_KINDS, Sensor, random_problem
+
+N = 3000
+
+
+def _filter(kind: str, config: dict) -> TableFilter:
+    built = get_spec(kind).build(config)
+    assert isinstance(built, TableFilter)
+    return built
+
+
+def _same(a: Snapshot, b: Snapshot) -> None:
+    assert (a.sample, a.n_samples, a.chunk_start) == (b.sample, b.n_samples, b.chunk_start)
+    assert a.time_s == b.time_s
+    assert a.rejected == b.rejected
+    assert a.outputs.keys() == b.outputs.keys()
+    for name in a.outputs:
+        np.testing.assert_array_equal(a.outputs[name], b.outputs[name])
+    np.testing.assert_array_equal(a.status, b.status)
+    assert a.table is not None
+    assert b.table is not None
+    np.testing.assert_array_equal(a.table.values, b.table.values)
+    if a.variance is None:
+        assert b.variance is None
+    else:
+        np.testing.assert_array_equal(a.variance, b.variance)
+    assert a.state.to_dict().keys() == b.state.to_dict().keys()
+    for key, value in a.state.to_dict().items():
+        np.testing.assert_array_equal(np.asarray(value), np.asarray(b.state.to_dict()[key]))
+
+
+class Reader:
+    """``read(a, z)`` over a log in memory, recording the rows each call returns."""
+
+    def __init__(self, signals: Signals) -> None:
+        self.signals, self.calls = signals, []
+
+    def __call__(self, a: int, z: int) -> Signals:
+        self.calls.append((a, z))
+        return self.signals.slice(a, z)
+
+
+def _problems() -> list[tuple[str, str]]:
+    cases = [(kind, "no sensor") for kind in KINDS]
+    cases += [(kind, "delay in samples") for kind in SENSOR_KINDS]
+    cases += [(kind, "delay in seconds") for kind in SENSOR_KINDS[:1]]
+    return cases
+
+
+@pytest.mark.parametrize(("kind", "sensor"), _problems())
+def test_windows_give_the_whole_log_run_bit_for_bit(kind: str, sensor: str) -> None:
+    with_sensor = sensor != "no sensor"
+    problem = random_problem(
+        11, n=N, shape=(6, 5), sensor=Sensor(0.6, 3, 0.05) if with_sensor else None
+    )
+    config = problem.config(kind)
+    if sensor == "delay in seconds":
+        config["sensor"] = {**config["sensor"], "delay_samples": None, "delay_s": 0.06}
+    signals = problem.signals()
+    whole = list(_filter(kind, config).run(signals, every=97))
+    read = Reader(signals)
+    windowed = list(_filter(kind, config).run_windows(read, N, every=97, window=400))
+    assert len(windowed) == len(whole)
+    for a, b in zip(whole, windowed, strict=True):
+        _same(a, b)
+    tau = 3 if with_sensor else 0
+    assert len(read.calls) > N // 500  # it did read in windows
+    assert max(z - a for a, z in read.calls) <= 485 + tau  # 5 chunks of 97 and the delay
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_a_resumed_windowed_run_continues_as_the_whole_log_run(kind: str) -> None:
+    problem = random_problem(12, n=N, shape=(4, 4), sensor=Sensor(0.5, 2, 0.05))
+    config = problem.config(kind) if kind in SENSOR_KINDS else problem.without_sensor().config(kind)
+    signals = problem.signals()
+    first = list(_filter(kind, config).run(signals, every=250))
+    middle = first[4].state
+    whole = list(_filter(kind, config).run(signals, every=250, state=middle))
+    windowed = list(
+        _filter(kind, config).run_windows(Reader(signals), N, every=250, state=middle, window=600)
+    )
+    assert len(windowed) == len(whole)
+    for a, b in zip(whole, windowed, strict=True):
+        _same(a, b)
+    done = list(
+        _filter(kind, config).run_windows(Reader(signals), N, every=250, state=whole[-1].state)
+    )
+    assert len(done) == 1
+    assert done[0].sample == N
+    assert done[0].outputs["prediction"].size == 0
+
+
+def test_a_sample_period_that_changes_along_the_log_is_refused() -> None:
+    problem = random_problem(13, n=N, sensor=Sensor(0.6, 3, 0.05))
+    config = problem.config("skf")
+    config["sensor"] = {**config["sensor"], "delay_samples": None, "delay_s": 0.0701}
+    signals = problem.signals()
+    uneven = np.concatenate([signals.time[:2000], signals.time[1999] + 0.04 * np.arange(1, 1001)])
+    slowed = Signals(uneven, {n: signals[n] for n in signals.names}, signals.units)
+    with pytest.raises(SignalError, match="not uniformly sampled"):
+        list(_filter("skf", config).run(slowed, every=100))
+    with pytest.raises(SignalError, match="not uniformly sampled"):  # in the window with it
+        list(_filter("skf", config).run_windows(Reader(slowed), N, every=100, window=500))
+    # 50 Hz, then 49.75 Hz: uniform within 1 % throughout, but 0.0701 s is 4 samples at the
+    # first rate and 3 at the second; the whole log takes the median's, a window its own
+    drift = np.concatenate([signals.time[:2000], signals.time[1999] + 0.0201 * np.arange(1, 1001)])
+    drifting = Signals(drift, {n: signals[n] for n in signals.names}, signals.units)
+    list(_filter("skf", config).run(drifting, every=100))
+    with pytest.raises(ConfigError, match="sample period changes"):
+        list(_filter("skf", config).run_windows(Reader(drifting), N, every=100, window=2000))
