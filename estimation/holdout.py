@@ -26,6 +26,7 @@ This is the map filters' check. Each estimator kind has its own, named in the re
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -33,8 +34,17 @@ import numpy as np
 from pydantic import BaseModel
 
 from estimation.errors import ConfigError
-from estimation.filters.estimator import REGRESSOR_BLOCK, Prepared
-from estimation.innovation import InnovationStats, map_filter, run_innovations, stats_of
+from estimation.filters.estimator import REGRESSOR_BLOCK, WINDOW_STEPS, Prepared, TableFilter
+from estimation.filters.functions import run_chunk
+from estimation.filters.settings import FilterSettings
+from estimation.filters.state import FilterState
+from estimation.innovation import (
+    InnovationStats,
+    InnovationSums,
+    map_filter,
+    run_innovations,
+    stats_of,
+)
 from estimation.kernels.sensor import sensor_kernel
 from estimation.metrics import output_metrics
 from estimation.signals import Signals
@@ -199,3 +209,114 @@ def _evaluate(table: Table, inputs: list[np.ndarray], start: int, stop: int) -> 
         z = min(a + REGRESSOR_BLOCK, stop)
         out[a - start : z - start] = table.evaluate(np.column_stack([u[a:z] for u in inputs]))
     return out
+
+
+@dataclass(slots=True)
+class _ErrorSums:
+    """:func:`output_metrics` of an error that comes a block at a time."""
+
+    n: int = 0
+    e2: float = 0.0
+    abs_sum: float = 0.0
+    abs_max: float = 0.0
+
+    def add(self, error: np.ndarray) -> None:
+        e = error[np.isfinite(error)]
+        if e.size:
+            self.n += int(e.size)
+            self.e2 += float(np.sum(e * e))
+            self.abs_sum += float(np.sum(np.abs(e)))
+            self.abs_max = max(self.abs_max, float(np.max(np.abs(e))))
+
+    def metrics(self) -> dict[str, float]:
+        if not self.n:
+            return output_metrics(np.empty(0))
+        n = self.n
+        return {
+            "rmse": float(np.sqrt(self.e2 / n)),
+            "mae": self.abs_sum / n,
+            "max_abs_error": self.abs_max,
+        }
+
+
+def holdout_error_windows(
+    estimator: str,
+    config: BaseModel | dict[str, Any],
+    read: Callable[[int, int], Signals],
+    n: int,
+    *,
+    unit: str,
+    fraction: float = DEFAULT_FIT_FRACTION,
+    window: int = WINDOW_STEPS,
+) -> HoldoutResult:
+    """:func:`holdout_error` of a log of ``n`` samples that is never held whole (every
+    sample accepted): ``read(a, z)`` gives its rows ``a … z−1``, read ``window`` at a time,
+    once for the fit and once for the prediction. The statistics are running sums, equal to
+    :func:`holdout_error`'s up to rounding (``tests/estimation/test_holdout.py``)."""
+    m = split_point(n, fraction)
+    filt = map_filter(estimator, config)
+    sums, state, settings = _fit_windows(filt, read, m, window)
+    delay = settings.delay
+    if m - delay < 1 or n - m < 1:
+        raise ConfigError(
+            f"a log of {n} samples is too short to fit on {m} (sensor delay {delay}) and "
+            "predict the rest"
+        )
+    table = filt.theta0.with_values(state.theta.reshape(filt.grid.shape))
+    adapted, base = _ErrorSums(), _ErrorSums()
+    tau = delay if settings.has_sensor else 0
+    y_last = float(read(m - 1, m)[filt.config.output][0])
+    last = {"adapted": y_last, "base": y_last}  # the sensor model's state of each map
+    for a in range(m, n, window):
+        z = min(a + window, n)
+        rows = read(a - tau, z)  # operating points a−τ … z−τ−1, measurements a … z−1
+        inputs = [rows[ax.name][: z - a] for ax in filt.config.axes]
+        y = rows[filt.config.output][tau:]
+        for name, frozen, sums_of in (("adapted", table, adapted), ("base", filt.theta0, base)):
+            x = _evaluate(frozen, inputs, 0, z - a)
+            if settings.has_sensor:
+                out = np.empty(x.size)
+                sensor_kernel(x, 0, float(settings.lag), last[name], out)
+                last[name], x = float(out[-1]), out
+            sums_of.add(y - x)
+    return HoldoutResult(
+        unit=unit,
+        fraction=fraction,
+        fit_samples=m,
+        holdout_samples=n - m,
+        scored=n - m,
+        adapted=adapted.metrics(),
+        base=base.metrics(),
+        innovations=sums.stats(),
+        table=table,
+    )
+
+
+def _fit_windows(
+    filt: TableFilter, read: Callable[[int, int], Signals], m: int, window: int
+) -> tuple[InnovationSums, FilterState, FilterSettings]:
+    """:func:`run_innovations` over rows ``0 … m−1``, a window at a time, keeping the sums
+    of the accepted innovations instead of the series."""
+    settings = filt.settings_for(read(0, min(m, window)))
+    tau = settings.delay
+    if tau >= m:
+        raise ConfigError(f"sensor delay of {tau} samples is not shorter than the log ({m})")
+    sums = InnovationSums()
+    state: FilterState | None = None
+    for a in range(0, m - tau, window):
+        z = min(a + window, m - tau)
+        prepared = filt.prepare(read(a, z + tau), window=(a, m, settings))
+        if state is None:
+            state = filt.initial_state(prepared)
+        for b in range(0, z - a, REGRESSOR_BLOCK):
+            c = min(b + REGRESSOR_BLOCK, z - a)
+            idx, w = prepared.regressor(b, c)
+            s = np.empty(c - b)
+            state, yhat, status = run_chunk(
+                state, idx, w, prepared.y[b:c], prepared.accept[b:c], settings, s_out=s
+            )
+            e = prepared.y[b:c] - yhat
+            ok = (status == 0) & np.isfinite(e) & (s > 0)
+            sums.add(e[ok], s[ok])
+    assert state is not None
+    return sums, state, settings

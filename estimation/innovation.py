@@ -181,6 +181,49 @@ def innovation_stats(e: np.ndarray, s: np.ndarray) -> InnovationStats:
     )
 
 
+@dataclass(slots=True)
+class InnovationSums:
+    """:func:`innovation_stats` of accepted steps that come a block at a time (a log read in
+    windows): running sums, equal to the whole-array statistics up to rounding."""
+
+    samples: int = 0
+    nis: float = 0.0
+    in_band: int = 0
+    e: float = 0.0
+    e2: float = 0.0
+    log_terms: float = 0.0  # Σ log 2πS + NIS
+    band: tuple[float, float] | None = None  # χ²(1) band, found on first use
+
+    def add(self, e: np.ndarray, s: np.ndarray) -> None:
+        """Add accepted steps' innovations ``e`` and variances ``s`` (all ``s > 0``)."""
+        if not e.size:
+            return
+        if self.band is None:
+            self.band = chi2_band(1)
+        nis = e * e / s
+        self.samples += int(e.size)
+        self.nis += float(np.sum(nis))
+        self.in_band += int(np.count_nonzero((nis >= self.band[0]) & (nis <= self.band[1])))
+        self.e += float(np.sum(e))
+        self.e2 += float(np.sum(e * e))
+        self.log_terms += float(np.sum(np.log(2.0 * math.pi * s) + nis))
+
+    def stats(self) -> InnovationStats:
+        n = self.samples
+        if n == 0:
+            return innovation_stats(np.empty(0), np.empty(0))
+        lo, hi = chi2_band(n)
+        return InnovationStats(
+            samples=n,
+            mean_nis=self.nis / n,
+            mean_nis_band=(lo / n, hi / n),
+            in_band=self.in_band / n,
+            innovation_mean=self.e / n,
+            innovation_rms=math.sqrt(self.e2 / n),
+            log_likelihood=-0.5 * self.log_terms,
+        )
+
+
 def stats_of(run: Innovations) -> InnovationStats:
     """:func:`innovation_stats` over the accepted steps of a pass."""
     ok = run.accepted

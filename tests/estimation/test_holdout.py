@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from estimation.errors import ConfigError
-from estimation.holdout import holdout_error
+from estimation.holdout import holdout_error, holdout_error_windows
 from estimation.kernels.sensor import sensor_kernel
+from estimation.registry import get_spec
 from estimation.scenarios import get_scenario
 from estimation.signals import Signals
 from estimation.table import Axis, Table
@@ -102,3 +103,32 @@ def test_adapted_nox_map_beats_the_base_map_on_held_out_nedc_data(estimator: str
             result = holdout_error(estimator, base, data.signals)
             assert result.adapted["rmse"] < 0.95 * result.base["rmse"], (seed, result)
             assert result.adapted["mae"] < result.base["mae"], (seed, result)
+
+
+@pytest.mark.parametrize("kind", ["kf", "skf", "sskf", "rls", "nlms"])
+@pytest.mark.parametrize("sensor", [None, {"lag": 0.7, "delay_samples": 4, "sigma_f": 0.05}])
+def test_the_windowed_holdout_is_the_whole_log_holdout(kind: str, sensor: dict | None) -> None:
+    """Read a window at a time (a streamed run's check), the held-out errors and the
+    innovation statistics are the whole-log ones up to rounding, the frozen map bit for bit."""
+    signals = log(4000, sigma_v=0.5, lag=0.7 if sensor else 0.0, delay=4 if sensor else 0)
+    extra = {} if sensor is None or kind not in ("kf", "skf", "sskf") else {"sensor": sensor}
+    if kind == "rls":
+        extra |= {"forgetting": 0.995}
+    cfg = config(**extra)
+    cfg = {k: v for k, v in cfg.items() if k in get_spec(kind).config_model.model_fields}
+    whole = holdout_error(kind, cfg, signals)
+    reads: list[tuple[int, int]] = []
+
+    def read(a: int, z: int) -> Signals:
+        reads.append((a, z))
+        return signals.slice(a, z)
+
+    windowed = holdout_error_windows(kind, cfg, read, len(signals), unit="ppm", window=333)
+    np.testing.assert_array_equal(windowed.table.values, whole.table.values)
+    assert windowed.metrics().keys() == whole.metrics().keys()
+    for key, value in whole.metrics().items():
+        assert windowed.metrics()[key] == pytest.approx(value, rel=1e-9, abs=1e-12), key
+    assert windowed.innovations.log_likelihood == pytest.approx(
+        whole.innovations.log_likelihood, rel=1e-9
+    )
+    assert max(z - a for a, z in reads) <= 333 + 4
