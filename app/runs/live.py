@@ -27,6 +27,11 @@ LIVE_POINTS_PER_TICK = 100
 # Map cells sent per second per run, at most (each of values, variances and visits): a
 # 250 000-cell map goes out every 1.25 s, a 20 × 20 map on every tick.
 LIVE_CELLS_PER_S = 200_000
+# Samples a tick shows at most: its last ones. A tick spans more only when the run goes
+# faster than LIVE_SPAN × live_fps samples a second (5 M/s at 20 fps), or at the final tick
+# of a run whose ticks were skipped; reading and decimating all of them would make the
+# tick's memory grow with the log (the stored series keep every sample's extremes).
+LIVE_SPAN = 1 << 18
 
 
 class LiveTicks:
@@ -82,21 +87,22 @@ class LiveTicks:
         a, z = self.sample, snap.sample
         self.sample = z
         self.seq += 1
-        index = a + stride_decimate(max(z - a, 0), LIVE_POINTS_PER_TICK)
-        signals = results.signals
-        time_s = signals.time[index]
+        a = max(a, z - LIVE_SPAN)
+        index = stride_decimate(max(z - a, 0), LIVE_POINTS_PER_TICK)
+        rows = results.log.rows(a, z)  # a streamed run: the window just run, still cached
+        time_s = rows.time[index]
         table = snap.table
         trajectory: dict[str, Any] = {"time": [], "points": []}
         active = None
-        if table is not None and all(ax.name in signals for ax in table.axes):
-            points = np.column_stack([signals[ax.name][index] for ax in table.axes])
+        if table is not None and all(ax.name in results.log.names for ax in table.axes):
+            points = np.column_stack([rows[ax.name][index] for ax in table.axes])
             trajectory = {"time": finite_or_none(time_s), "points": points.tolist()}
             active = results.active_cell(z)
         # The series keep each bucket's extremes (a one-sample spike shows while the run
         # goes); the trail needs no more than evenly spread points.
         lines = results.lines(a, z)
         series_time, series_values = minmax_decimate(
-            signals.time[a:z], {x.name: x.values for x in lines}, LIVE_POINTS_PER_TICK
+            rows.time, {x.name: x.values for x in lines}, LIVE_POINTS_PER_TICK
         )
         series = {
             x.name: {

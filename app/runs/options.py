@@ -10,9 +10,11 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+from app.domain import Dataset
 from app.errors import InvalidRequestError
 from app.io.errors import InputError
 from app.io.resample import Raster, parse_raster
+from estimation.registry import EstimatorKind, EstimatorSpec
 
 MAX_VERSIONS = 1000  # persisted versions per run (each carries the map and estimator state)
 MIN_PACE = 0.01  # slowest replay, × real time: a slower one holds a worker for ages
@@ -25,6 +27,19 @@ class RunOptions:
     pace: float | None  # real-time multiple; None: as fast as possible
     version_every: int  # samples between persisted map versions
     gates: list[dict[str, Any]]
+
+
+def streams_input(spec: EstimatorSpec, config: dict[str, Any], dataset: Dataset) -> bool:
+    """Whether a run reads its log a window at a time from the store, never whole
+    (`docs/data-formats.md#streamed-runs`): when nothing in it needs the whole log — a map
+    filter (:meth:`~estimation.filters.estimator.TableFilter.run_windows`) on a dense
+    uploaded dataset (no truth to score, nothing to resample) without sample gates."""
+    return (
+        spec.kind == EstimatorKind.MAP_FILTER
+        and dataset.scenario is None
+        and not dataset.recorded
+        and not config.get("gates")
+    )
 
 
 def run_raster(config: dict[str, Any]) -> Raster | None:

@@ -30,11 +30,13 @@ from typing import Any
 import numpy as np
 
 from app.domain import Dataset, ResumePoint, Run, Series, SeriesRole
-from app.io.decimate import minmax_decimate
+from app.io.decimate import MinMaxBuckets, minmax_decimate
 from app.io.payload import Truth
 from app.runs.gates import GateResult, cell_counts, nearest_cell
+from app.store.log_rows import LogRows, MemoryRows
 from estimation.errors import EstimationError
 from estimation.estimator import Estimator, Snapshot
+from estimation.holdout import holdout_error_windows
 from estimation.metrics import running_ise, score_run, torque_window
 from estimation.registry import EstimatorSpec
 from estimation.signals import Signals
@@ -45,6 +47,7 @@ STATUS_ACCEPTED = 0
 # code 1, the accept mask, is counted by the gate that set it).
 CELL_STATUS = {"innovation": 2, "delay": 3}
 STATUS_KEY = "__status__"  # the status codes' name in a persisted segment
+SERIES_WINDOW = 1 << 18  # rows of a streamed log decimated at a time into the stored series
 
 
 def channels_read(run: Run, estimator: Estimator, truth: Truth | None) -> list[str]:
@@ -71,20 +74,25 @@ def _run_operating_channels(run: Run) -> list[str]:
 
 
 class RunResults:
-    """The per-sample outputs, status codes and cell counts of one run, so far."""
+    """The per-sample outputs, status codes and cell counts of one run, so far.
+
+    The log is read through ``log`` (:mod:`app.store.log_rows`): held whole
+    (:class:`MemoryRows`), or, in a streamed run, a window at a time from the store; only
+    the outputs and status codes span the log (17 bytes a sample for a map filter)."""
 
     def __init__(
         self,
         run: Run,
         spec: EstimatorSpec,
         dataset: Dataset,
-        signals: Signals,
+        log: LogRows | Signals,
         truth: Truth | None,
         gates: GateResult | None,
     ) -> None:
-        self.run, self.spec, self.dataset, self.signals = run, spec, dataset, signals
+        self.run, self.spec, self.dataset = run, spec, dataset
+        self.log: LogRows = MemoryRows(log) if isinstance(log, Signals) else log
         self.truth, self.gates = truth, gates
-        self.n = len(signals)
+        self.n = self.log.n
         self.outputs: dict[str, np.ndarray] = {}
         self.status = np.full(self.n, -1, dtype=np.int8)
         self.grid: Table | None = None  # the map's grid, once a snapshot shows it
@@ -97,6 +105,18 @@ class RunResults:
         self._first_gate_cache: tuple[int, np.ndarray] | None = None
         self._rejections_seen = False  # a processed sample had status > 0
         self._ise_before = (0, 0.0)  # (k, running ISE of samples [0, k)) of the last slice
+
+    @property
+    def streamed(self) -> bool:
+        """The log is read a window at a time, never held whole."""
+        return not isinstance(self.log, MemoryRows)
+
+    @property
+    def signals(self) -> Signals:
+        """The whole log, for what only a run holding it does (truth, gates, torque ISE)."""
+        if not isinstance(self.log, MemoryRows):
+            raise RuntimeError("a streamed run does not hold its log whole")
+        return self.log.signals
 
     # -- accumulation -------------------------------------------------------------------------
 
@@ -206,7 +226,7 @@ class RunResults:
         """Visits (interpolation weight of accepted samples) and rejections per cell, from
         the chunk's regressor rows (made per chunk: a run never holds the whole log's)."""
         if self.grid is None:
-            if not all(ax.name in self.signals for ax in table.axes):
+            if not all(ax.name in self.log.names for ax in table.axes):
                 return
             self.grid = table
             if self.visits is None:
@@ -225,8 +245,8 @@ class RunResults:
     def _regressor(self, a: int, z: int) -> tuple[np.ndarray, np.ndarray]:
         """The map grid's regressor rows of log samples ``[a, z)``."""
         assert self.grid is not None
-        inputs = [self.signals[ax.name][a:z] for ax in self.grid.axes]
-        return self.grid.regressor(np.column_stack(inputs))
+        rows = self.log.rows(a, z)
+        return self.grid.regressor(np.column_stack([rows[ax.name] for ax in self.grid.axes]))
 
     def _rejection_masks(self, a: int, z: int, status: np.ndarray) -> dict[str, np.ndarray]:
         masks = {name: status == code for name, code in CELL_STATUS.items()}
@@ -242,15 +262,15 @@ class RunResults:
         samples, so its cost does not grow with the log."""
         a, z = start, self.n if stop is None else stop
         raw: list[tuple[str, SeriesRole, str, np.ndarray]] = []
-        units = self.signals.units
+        rows = self.log.rows(a, z)
+        units = self.log.units
         for channel in self._operating_channels():
-            values = self.signals[channel][a:z]
-            raw.append((channel, SeriesRole.INPUT, units.get(channel, ""), values))
+            raw.append((channel, SeriesRole.INPUT, units.get(channel, ""), rows[channel]))
         config = self.run.estimator_config
         output, out_unit = config.get("output"), config.get("output_unit", "")
-        if isinstance(output, str) and output in self.signals:
+        if isinstance(output, str) and output in self.log.names:
             unit = units.get(output, "")
-            raw.append(("measured", SeriesRole.MEASURED, unit, self.signals[output][a:z]))
+            raw.append(("measured", SeriesRole.MEASURED, unit, rows[output]))
         for name, values in self.outputs.items():
             raw.append((name, SeriesRole.OUTPUT, self._unit(name, out_unit), values[a:z]))
         if self.truth is not None:
@@ -269,7 +289,7 @@ class RunResults:
             raw.append(("rejected", SeriesRole.REJECTED, "", rejected))
         out: list[Series] = []
         taken: set[str] = set()
-        time_s = self.signals.time[a:z]
+        time_s = rows.time
         for name, role, unit, values in raw:
             key = name if name not in taken else f"{role}:{name}"
             taken.add(key)
@@ -319,12 +339,23 @@ class RunResults:
     def series(self, points: int) -> list[Series]:
         """:meth:`lines` at most ``points`` samples long, for storage: min/max per bucket
         (:func:`minmax_decimate`) so a one-sample spike of an error stays in the stored
-        series (a stride would keep one sample in ``n / points`` and lose it)."""
-        lines = self.lines()
-        time_s, values = minmax_decimate(
-            self.signals.time, {x.name: x.values for x in lines}, points
-        )
-        return [Series(x.name, x.unit, time_s, values[x.name], x.role) for x in lines]
+        series (a stride would keep one sample in ``n / points`` and lose it). A streamed
+        run decimates its lines :data:`SERIES_WINDOW` rows at a time (:class:`MinMaxBuckets`,
+        the same result)."""
+        if not self.streamed:
+            lines = self.lines()
+            time_s, values = minmax_decimate(
+                self.signals.time, {x.name: x.values for x in lines}, points
+            )
+            return [Series(x.name, x.unit, time_s, values[x.name], x.role) for x in lines]
+        shape = self.lines(0, 0)
+        buckets = MinMaxBuckets(self.n, points, [x.name for x in shape])
+        for a in range(0, self.n, SERIES_WINDOW):
+            z = min(a + SERIES_WINDOW, self.n)
+            part = self.lines(a, z)
+            buckets.add(self.log.rows(a, z).time, {x.name: x.values for x in part})
+        time_s, values = buckets.result()
+        return [Series(x.name, x.unit, time_s, values[x.name], x.role) for x in shape]
 
     def _unit(self, name: str, out_unit: str) -> str:
         """The spec's unit of an output; ``""`` there means the output channel's unit."""
@@ -334,7 +365,7 @@ class RunResults:
         names = _run_operating_channels(self.run)
         if not names and self.grid is not None:
             names = [a.name for a in self.grid.axes]
-        return [name for name in dict.fromkeys(names) if name in self.signals]
+        return [name for name in dict.fromkeys(names) if name in self.log.names]
 
     # -- metrics ------------------------------------------------------------------------------
 
@@ -371,9 +402,17 @@ class RunResults:
         does not exist (the torque estimators). Empty when the log is too short to split.
         """
         accept = None if self.gates is None else self.gates.accept
-        check = self.spec.holdout_check()
+        config = self.run.estimator_config
         try:
-            result = check(self.spec.name, self.run.estimator_config, self.signals, accept=accept)
+            if self.streamed:  # a map filter's check, the log read a window at a time
+                output = config.get("output", "")
+                unit = config.get("output_unit") or self.log.units.get(output, "")
+                result = holdout_error_windows(
+                    self.spec.name, config, self.log.rows, self.n, unit=unit
+                )
+            else:
+                check = self.spec.holdout_check()
+                result = check(self.spec.name, config, self.signals, accept=accept)
         except EstimationError:
             return {}
         return dict(result.metrics())

@@ -16,9 +16,10 @@ request.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -32,10 +33,12 @@ from app.runs.attempt import Attempt, database
 from app.runs.gates import apply_gates, parse_gates
 from app.runs.limits import out_of_memory_message
 from app.runs.live import LiveTicks, Publish
-from app.runs.options import run_options, run_raster
+from app.runs.options import run_options, run_raster, streams_input
 from app.runs.results import RunResults, channels_read
 from app.store import default_store_url, load_on_raster, open_store
+from app.store.log_rows import open_rows
 from estimation.estimator import Snapshot
+from estimation.filters.estimator import TableFilter
 from estimation.registry import get_spec, load_state
 
 __all__ = ["RunSession", "WorkerContext", "database", "execute_run"]
@@ -128,7 +131,8 @@ class RunSession:
         heartbeat.start()
         try:
             self._status(RunStatus.RUNNING, None)
-            return self._execute()
+            with contextlib.ExitStack() as self.closing:  # a streamed run's open dataset
+                return self._execute()
         except SupersededError:
             return "superseded"  # a newer attempt owns the run: write nothing more
         finally:
@@ -176,21 +180,31 @@ class RunSession:
         if raster is not None and raster.channel is not None:
             names.append(raster.channel)
         store = open_store(self.ctx.store_url)
-        read = load_on_raster(store, loaded.samples, dataset.channels, names, raster=raster)
-        signals = read.signals
-        # a dataset stored as recorded: the rate of the raster this run's channels set
-        self.raster_s = read.step_s
-        self.rate_hz = dataset.rate_hz if read.step_s is None else 1.0 / read.step_s
-        self.options = run_options(
-            self.run.config, len(signals), self.rate_hz, self.ctx.version_fraction
-        )
-        gates = None
-        if self.options.gates:
-            known = [c.name for c in dataset.channels]
-            parsed = parse_gates(self.options.gates, known, field="config.gates")
-            gates = apply_gates(parsed, signals)
-        self.accept = None if gates is None else gates.accept
-        self.results = RunResults(self.run, spec, dataset, signals, truth, gates)
+        self.accept = None
+        if streams_input(spec, self.run.config, dataset):
+            rows = open_rows(store, loaded.samples, dataset.channels, names)
+            log = self.closing.enter_context(rows)
+            self.rate_hz = dataset.rate_hz
+            self.options = run_options(
+                self.run.config, log.n, self.rate_hz, self.ctx.version_fraction
+            )
+            self.results = RunResults(self.run, spec, dataset, log, truth, None)
+        else:
+            read = load_on_raster(store, loaded.samples, dataset.channels, names, raster=raster)
+            signals = read.signals
+            # a dataset stored as recorded: the rate of the raster this run's channels set
+            self.raster_s = read.step_s
+            self.rate_hz = dataset.rate_hz if read.step_s is None else 1.0 / read.step_s
+            self.options = run_options(
+                self.run.config, len(signals), self.rate_hz, self.ctx.version_fraction
+            )
+            gates = None
+            if self.options.gates:
+                known = [c.name for c in dataset.channels]
+                parsed = parse_gates(self.options.gates, known, field="config.gates")
+                gates = apply_gates(parsed, signals)
+            self.accept = None if gates is None else gates.accept
+            self.results = RunResults(self.run, spec, dataset, signals, truth, gates)
         self.state: Any = None
         if loaded.resume is not None:
             self.state = load_state(loaded.resume.state)
@@ -229,9 +243,7 @@ class RunSession:
         started = False
         t_run = time.perf_counter()
         last: Snapshot | None = None
-        for snap in self.estimator.run(
-            results.signals, every=self._chunk_size(), state=self.state, accept=self.accept
-        ):
+        for snap in self._snapshots(results):
             last = snap
             results.absorb(snap)
             if not started:
@@ -249,6 +261,19 @@ class RunSession:
                 self._sleep_until(wall0 + (snap.time_s - t0) / self.options.pace, snap)
         assert last is not None
         self._complete(last, time.perf_counter() - t_run)
+
+    def _snapshots(self, results: RunResults) -> Iterator[Snapshot]:
+        """The estimator's run: over the log held whole, or a window at a time from the
+        store (:meth:`TableFilter.run_windows`, the same snapshots)."""
+        every = self._chunk_size()
+        if not results.streamed:
+            return self.estimator.run(
+                results.signals, every=every, state=self.state, accept=self.accept
+            )
+        assert isinstance(self.estimator, TableFilter)
+        return self.estimator.run_windows(
+            results.log.rows, results.n, every=every, state=self.state
+        )
 
     def _check_stop(self, snap: Snapshot) -> None:
         assert self.results is not None

@@ -12,10 +12,17 @@ The predicted memory of a run is::
 
     WORKER_BASE_BYTES + (1 + h) · cost.memory_bytes(p, n, c) + 2 · 8 · channels · n
 
+and of a streamed run (a map filter reading its log a window at a time from the store,
+:func:`app.runs.options.streams_input`), with ``w = min(n, STREAM_ROWS)`` the rows it holds::
+
+    WORKER_BASE_BYTES + (1 + h) · cost.memory_bytes(p, w, c) + 2 · 8 · channels · w
+        + (8 · outputs + 1) · n
+
 the worker process itself, the estimator's declared cost for the run and for its held-out
 refit (``h = cost.holdout_passes``: 1, or 0 for an estimator without a truth-free check,
 since the refit runs while the run's own data are held), and the dataset (its Parquet object
-as read from the artifact store, and the unpacked channels). The compute time counts the
+as read from the artifact store, and the unpacked channels); a streamed run keeps only its
+per-sample outputs and status codes for the whole log. The compute time counts the
 refit's work the same way.
 """
 
@@ -35,6 +42,10 @@ OPS_PER_S_CEILING = 1e10
 """More arithmetic a second than one core does: ``work / OPS_PER_S_CEILING`` is a lower
 bound on a run's duration, so only runs that cannot finish in the budget are refused."""
 FLOAT_BYTES = 8
+STREAM_ROWS = 1 << 20
+"""Rows a streamed run holds at most: its window (``WINDOW_STEPS`` of
+:mod:`estimation.filters.estimator`), the decoded row groups it caches
+(:data:`app.store.log_rows.CACHED_GROUPS`) and a live tick's span, rounded up."""
 
 
 class OverBudgetError(InvalidRequestError):
@@ -127,13 +138,17 @@ def admit_run(
     pace: float | None,
     limits: Limits,
     table_field: str = "table.axes",
+    streamed: bool = False,
 ) -> Prediction:
     """Check a planned run against ``limits``; an :class:`OverBudgetError` naming the field
     to change if it does not fit, else the predicted figures."""
     check_cells(cells, limits, field=table_field, spec=spec)
     cost = spec.cost
-    data = FLOAT_BYTES * 2 * channels * samples
-    memory = WORKER_BASE_BYTES + cost.run_memory_bytes(cells, samples, corners=corners) + data
+    held = min(samples, STREAM_ROWS) if streamed else samples  # rows in memory at once
+    data = FLOAT_BYTES * 2 * channels * held
+    if streamed:
+        data += (FLOAT_BYTES * len(spec.output_units) + 1) * samples  # outputs, status codes
+    memory = WORKER_BASE_BYTES + cost.run_memory_bytes(cells, held, corners=corners) + data
     if memory > limits.run_memory_bytes:
         grows_with_table = cost.run_memory_bytes(cells, 0, corners=corners) > data
         raise OverBudgetError(

@@ -21,7 +21,7 @@ from app.domain import BaseMap, Dataset
 from app.errors import InvalidRequestError, field_of
 from app.io.columns import same_unit
 from app.io.names import check_name, name_schema
-from app.runs.options import run_options, run_raster
+from app.runs.options import run_options, run_raster, streams_input
 from app.services.admission import Limits, Prediction, admit_run, check_cells
 from app.services.catalog import TABLE_ROLE, EstimatorName, kind_of, needs_table, roles
 from estimation.errors import ConfigError, EstimationError
@@ -306,6 +306,7 @@ def plan_run(
             pace=options.pace,
             limits=limits,
             table_field="table.axes" if axes is not None else "config",
+            streamed=streams_input(spec, config, dataset),
         )
     try:
         estimator = spec.build(model)

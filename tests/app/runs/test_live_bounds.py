@@ -11,6 +11,7 @@ import numpy as np
 from app.domain import Series, SeriesRole
 from app.runs.hub import LiveHub
 from app.runs.live import LIVE_CELLS_PER_S, LIVE_POINTS_PER_TICK, LiveTicks
+from app.store.log_rows import MemoryRows
 from estimation.estimator import Snapshot
 from estimation.signals import Signals
 from estimation.table import Axis, Table
@@ -27,6 +28,7 @@ class FakeResults:
     def __init__(self) -> None:
         t = STEP_S * np.arange(SAMPLES)
         self.signals = Signals(t, {"u1": np.linspace(0, 1, SAMPLES), "u2": np.zeros(SAMPLES)})
+        self.log = MemoryRows(self.signals)
         self.n = SAMPLES
         self.visits = np.zeros((N, N))
         self.residual = np.sin(t)

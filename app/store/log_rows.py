@@ -1,0 +1,137 @@
+"""A run's log as rows read on demand: ``rows(a, z)`` is its samples ``a … z−1``.
+
+:class:`MemoryRows` slices a log held whole. :class:`StoredRows` reads a dense dataset's
+Parquet object (:mod:`app.store.parquet_signals`) a row group at a time, only the channels
+the run uses, and keeps the last :data:`CACHED_GROUPS` groups decoded, so a streamed run
+(`docs/data-formats.md#streamed-runs`) holds a window of the log, never the whole of it;
+the live view and the stored series read the rows the estimator has just read from that
+cache. :func:`open_rows` checks the object's hash first (:func:`open_verified`) and keeps
+its handle open while the run reads.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections import OrderedDict
+from collections.abc import Collection, Iterator, Sequence
+from typing import Protocol
+
+import numpy as np
+import pyarrow as pa
+
+from app.domain import Channel, StoredSamples
+from app.store.datasets import open_verified
+from app.store.errors import ArtifactCorruptError
+from app.store.objects import ArtifactStore
+from app.store.parquet_signals import SignalsFile
+from estimation.signals import Signals
+
+CACHED_GROUPS = 8  # 8 × 65 536 rows of the channels read: 16 MiB for time and three channels
+
+
+class LogRows(Protocol):
+    """A log of ``n`` samples with channels ``names`` (units ``units``), read by rows."""
+
+    n: int
+    names: list[str]
+    units: dict[str, str]
+
+    def rows(self, a: int, z: int) -> Signals: ...
+
+
+class MemoryRows:
+    """Rows of a log held whole."""
+
+    def __init__(self, signals: Signals) -> None:
+        self.signals = signals
+        self.n = len(signals)
+        self.names = list(signals.names)
+        self.units = dict(signals.units)
+
+    def rows(self, a: int, z: int) -> Signals:
+        s = self.signals
+        channels = {name: s[name][a:z] for name in self.names}
+        return Signals(s.time[a:z], channels, self.units, copy=False)
+
+
+class StoredRows:
+    """Rows of a dense dataset's object, read a row group at a time (module docstring)."""
+
+    def __init__(self, file: SignalsFile, names: Sequence[str], units: dict[str, str]) -> None:
+        if file.recorded:
+            raise ValueError("a dataset stored as recorded is read whole, onto a raster")
+        self.file = file
+        stored = [name for name, _ in file.channels]
+        self.names = [name for name in stored if name in set(names)]
+        self.units = {name: units[name] for name in self.names}
+        self.fields = [file.time_name, *self.names]
+        meta = file.reader.metadata
+        sizes = [meta.row_group(g).num_rows for g in range(meta.num_row_groups)]
+        self.starts = np.concatenate([[0], np.cumsum(sizes, dtype=np.int64)])
+        self.n = int(self.starts[-1])
+        self.cache: OrderedDict[int, list[np.ndarray]] = OrderedDict()
+
+    def rows(self, a: int, z: int) -> Signals:
+        a, z = max(0, a), min(self.n, z)
+        if z <= a:
+            empty = np.empty(0)
+            return Signals(empty, dict.fromkeys(self.names, empty), self.units, copy=False)
+        first = int(np.searchsorted(self.starts, a, side="right")) - 1
+        last = int(np.searchsorted(self.starts, z, side="left"))
+        groups = [self._group(g) for g in range(first, last)]
+        lo, hi = a - int(self.starts[first]), z - int(self.starts[first])
+        arrays = [
+            parts[0][lo:hi] if len(parts) == 1 else np.concatenate(parts)[lo:hi]
+            for parts in zip(*groups, strict=True)
+        ]
+        channels = dict(zip(self.names, arrays[1:], strict=True))
+        return Signals(arrays[0], channels, self.units, copy=False)
+
+    def _group(self, g: int) -> list[np.ndarray]:
+        if g in self.cache:
+            self.cache.move_to_end(g)
+            return self.cache[g]
+        try:
+            table = self.file.reader.read_row_group(g, columns=self.fields, use_threads=False)
+            arrays = [_floats(table.column(k)) for k in range(len(self.fields))]
+        except (OSError, ValueError, pa.ArrowException) as exc:
+            raise ArtifactCorruptError(f"row group {g} cannot be decoded: {exc}") from exc
+        self.cache[g] = arrays
+        while len(self.cache) > CACHED_GROUPS:
+            self.cache.popitem(last=False)
+        return arrays
+
+
+def _floats(column: pa.ChunkedArray) -> np.ndarray:
+    if column.null_count:
+        raise ValueError(f"a column has {column.null_count} missing values")
+    chunks = [chunk.to_numpy(zero_copy_only=False) for chunk in column.chunks]
+    return chunks[0] if len(chunks) == 1 else np.concatenate(chunks)
+
+
+@contextlib.contextmanager
+def open_rows(
+    store: ArtifactStore,
+    stored: StoredSamples,
+    channels: Sequence[Channel],
+    names: Collection[str],
+) -> Iterator[StoredRows]:
+    """The dense dataset's object as :class:`StoredRows` of the channels ``names`` (those it
+    has), its hash checked first and its channels those of the dataset's row."""
+    dataset_id, key = stored.dataset_id, stored.key
+    with open_verified(store, dataset_id, key, stored.sha256) as f:
+        try:
+            file = SignalsFile.open(f)
+        except (ValueError, OSError, pa.ArrowException) as exc:
+            raise ArtifactCorruptError(
+                f"dataset {dataset_id}: its samples {key} cannot be decoded: {exc}",
+                field="dataset_id",
+            ) from exc
+        expect = [c.name for c in channels]
+        if [name for name, _ in file.channels] != expect:
+            raise ArtifactCorruptError(
+                f"dataset {dataset_id}: its samples {key} hold channels "
+                f"{[name for name, _ in file.channels]}, not the dataset's {expect}",
+                field="dataset_id",
+            )
+        yield StoredRows(file, list(names), {c.name: c.unit for c in channels})
