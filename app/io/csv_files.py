@@ -138,7 +138,8 @@ def parse_csv(
     is ``"."``, ``","`` or ``None`` (detected). ``bytes`` are UTF-8 (a BOM is skipped);
     pure ASCII is parsed without decoding. Raises :class:`LogFormatError`.
     """
-    table = _read_table(
+    text = _decoded(text)
+    header = read_header(
         text,
         columns=columns,
         time_column=time_column,
@@ -149,6 +150,7 @@ def parse_csv(
         max_columns=max_columns,
         empty_is_missing=False,
     )
+    table = _read_body(text, header)
     try:
         parsed = {name: v for name, v in table.values.items() if v is not None}
         signals = Signals(table.time, parsed, table.units, copy=False)
@@ -174,7 +176,8 @@ def parse_sparse_csv(
     ``-inf`` is a masked sample (NaN, its row in :attr:`SparseCsv.masked_rows`), never a
     reason to refuse the file; in the time column it is refused. A row with no sample of
     any channel is refused, naming its line. ``bytes`` as in :func:`parse_csv`."""
-    table = _read_table(
+    text = _decoded(text)
+    header = read_header(
         text,
         columns=None,
         time_column=time_column,
@@ -185,6 +188,7 @@ def parse_sparse_csv(
         max_columns=max_columns,
         empty_is_missing=True,
     )
+    table = _read_body(text, header)
     try:
         Signals(table.time, {})
     except SignalError as exc:
@@ -324,36 +328,19 @@ def read_header(
     )
 
 
-def _read_table(
-    text: str | bytes,
-    *,
-    columns: Sequence[str] | None,
-    time_column: str | None,
-    strict: bool,
-    units: Mapping[str, str] | None,
-    decimal: str | None,
-    max_header_chars: int | None,
-    max_columns: int | None,
-    empty_is_missing: bool,
-) -> _Table:
-    """The header, units and numeric columns of CSV ``text`` (the rules of
-    :func:`parse_csv`); with ``empty_is_missing`` an empty data cell is NaN."""
+def _decoded(text: str | bytes) -> str | bytes:
+    """``text`` as it is parsed: pure-ASCII bytes as they are, other bytes as UTF-8 (a BOM
+    skipped)."""
     if isinstance(text, bytes) and not text.isascii():
         try:
-            text = text.decode("utf-8-sig")
+            return text.decode("utf-8-sig")
         except UnicodeDecodeError as exc:
             raise LogFormatError(f"not a UTF-8 text file ({exc.reason})", field="file") from None
-    header = read_header(
-        text,
-        columns=columns,
-        time_column=time_column,
-        strict=strict,
-        units=units,
-        decimal=decimal,
-        max_header_chars=max_header_chars,
-        max_columns=max_columns,
-        empty_is_missing=empty_is_missing,
-    )
+    return text
+
+
+def _read_body(text: str | bytes, header: CsvHeader) -> _Table:
+    """The numeric columns of the body of CSV ``text`` after its ``header``."""
     from app.io.csv_arrow import read_body  # pyarrow: loaded with the first log read
 
     body = read_body(

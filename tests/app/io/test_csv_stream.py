@@ -194,27 +194,20 @@ def test_a_file_that_cannot_stream_is_read_whole_with_the_same_outcome(
 def test_a_file_over_the_whole_read_limit_streams_or_is_refused_saying_why(
     service: DatasetService,
 ) -> None:
-    dense = _text(_rows()).encode()
-    dataset = service.upload(
-        io.BytesIO(dense),
-        filename="a.csv",
-        name=None,
-        units=None,
-        max_bytes=1 << 30,
-        max_whole_bytes=1000,
-        stream_min_bytes=0,
-    )
-    assert dataset.rows == ROWS
-    with pytest.raises(InputError) as refused:
-        service.upload(
-            io.BytesIO(_sparse()),
-            filename="b.csv",
+    def upload(data: bytes) -> Dataset:
+        return service.upload(
+            io.BytesIO(data),
+            filename="a.csv",
             name=None,
             units=None,
             max_bytes=1 << 30,
             max_whole_bytes=1000,
             stream_min_bytes=0,
         )
+
+    assert upload(_text(_rows()).encode()).rows == ROWS
+    with pytest.raises(InputError) as refused:
+        upload(_sparse())
     assert refused.value.code == "payload_too_large"
     assert "cannot stream" in str(refused.value)
     assert "MAPWISE_MAX_WHOLE_MB" in str(refused.value)
