@@ -7,6 +7,9 @@ The drive log of ``scripts/bench_service.py`` (time + 12 channels at 100 Hz, ``%
   pyarrow blocks, checks, :class:`estimation.Signals`;
 * ``mapwise upload parse`` — :func:`app.io.csv_files.parse_sparse_csv` on the decoded text
   (what an upload runs, empty cells allowed);
+* ``mapwise streamed parse`` / ``upload`` — :func:`app.io.csv_stream.stream_csv`, what an
+  upload of a dense CSV of 16 MiB or more runs: 4 MiB blocks by pyarrow, the checks, into
+  nothing (parse only) or into the dataset's Parquet file (written and hashed);
 * ``pyarrow.csv alone`` — ``pyarrow.csv.read_csv(path)`` with its defaults (a Table, types
   inferred, multi-threaded);
 * ``pandas.read_csv`` — its defaults (C engine), skipped with a note when pandas is absent;
@@ -44,11 +47,60 @@ READERS = {
     "mapwise upload parse": "import app.io.csv_arrow\n"
     "from app.io.csv_files import parse_sparse_csv\n"
     "read = lambda path: parse_sparse_csv(path.read_text(encoding='utf-8-sig'))",
+    # the streamed upload (app/io/csv_stream.py): once parsing only, into a sink that keeps
+    # nothing, and once writing the dataset's Parquet file as an upload does
+    "mapwise streamed parse": "import app.io.csv_arrow\n"
+    "from scripts.bench_ingest import streamed\n"
+    "read = lambda path: streamed(path, parquet=False)",
+    "mapwise streamed upload": "import app.io.csv_arrow\n"
+    "from scripts.bench_ingest import streamed\n"
+    "read = lambda path: streamed(path, parquet=True)",
     "pyarrow.csv alone": "import pyarrow.csv\nread = pyarrow.csv.read_csv",
     "pandas.read_csv": "import pandas\nread = pandas.read_csv",
     "old pure-Python": "from tests.support.csv_reference import read_csv as read",
 }
 BASELINE = "pyarrow.csv alone"  # what "our parse" is held to: within 1.5x of it
+
+
+class _Nowhere:
+    """A row sink that keeps nothing (:class:`app.io.csv_stream.RowSink`)."""
+
+    def write(self, time: Any, values: Any) -> None:
+        pass
+
+    def close(self) -> str:
+        return ""
+
+    def abort(self) -> None:
+        pass
+
+
+def streamed(path: Path, *, parquet: bool) -> Any:
+    """The streamed upload of ``path``: parsed block by block, into a Parquet file beside it
+    (written and hashed, then removed) or into nowhere."""
+    from app.io.csv_stream import stream_csv
+    from app.store.parquet_signals import SignalsWriter
+
+    out = path.with_suffix(".parquet")
+
+    def sink(channels: list[tuple[str, str]]) -> Any:
+        return SignalsWriter(out, channels) if parquet else _Nowhere()
+
+    try:
+        with path.open("rb") as f:
+            return stream_csv(
+                f,
+                sink,
+                units=None,
+                time_column=None,
+                channels=None,
+                rate_hz=None,
+                max_header_bytes=1 << 16,
+                max_channels=2000,
+                min_samples=2,
+            )
+    finally:
+        out.unlink(missing_ok=True)
 
 
 def make_logs(directory: Path, rows: list[int]) -> dict[int, Path]:
