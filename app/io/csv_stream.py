@@ -5,8 +5,8 @@ the rules of every CSV (:func:`app.io.csv_files.read_header`); the body is then 
 :data:`BLOCK_BYTES` at a time, cut at a line end, parsed by ``pyarrow.csv``
 (:func:`app.io.csv_arrow.arrow_block`) and appended to the file through a
 :class:`RowSink` (the store's :class:`~app.store.parquet_signals.SignalsWriter`). The
-process holds one block of text, its columns and the time column (8 bytes a row, for the
-rate), whatever the file's size.
+process holds one block of text, its columns and the time steps (8 bytes a row, for the
+median rate), whatever the file's size.
 
 Only a *dense* log streams: UTF-8 text whose every cell is a finite number, a time column
 (or a given row rate) strictly increasing, no empty cell. That is what a logger's CSV
@@ -118,24 +118,56 @@ def stream_csv(
     source.seek(skip + len(text[: header.body_start].encode("utf-8")))
     writer = open_sink([(n, header.units[n]) for n in kept])
     try:
-        times = _stream_body(source, header, kept, rate_hz, writer)
+        steps = _stream_body(source, header, kept, rate_hz, writer)
     except BaseException:
         writer.abort()
         raise
-    time = np.concatenate(times) if times else np.empty(0)
-    if time.size < max(min_samples, 2):
+    if steps.rows < max(min_samples, 2):
         writer.abort()
-        raise NotDense(f"{time.size} rows")
+        raise NotDense(f"{steps.rows} rows")
     sha256 = writer.close()
     return StreamedCsv(
-        rows=int(time.size),
+        rows=steps.rows,
         channels=[(n, header.units[n]) for n in kept],
         time_column=header.time_column,
-        rate_hz=float(1.0 / np.median(np.diff(time))),
-        duration_s=float(time[-1] - time[0]),
+        rate_hz=float(1.0 / steps.median()),
+        duration_s=steps.last - steps.first,
         notes=tuple(notes),
         sha256=sha256,
     )
+
+
+@dataclass(slots=True)
+class _Steps:
+    """The time base as it streams in: its first and last time, its rows, and its steps
+    ``t[k] − t[k−1]`` (the same floats as ``np.diff`` of the whole column), kept for the
+    median rate; a step ≤ 0 is refused as it comes."""
+
+    blocks: list[np.ndarray]
+    rows: int = 0
+    first: float = 0.0
+    last: float = 0.0
+
+    def add(self, time: np.ndarray) -> None:
+        steps = np.diff(time, prepend=self.last) if self.rows else np.diff(time)
+        if np.any(steps <= 0):
+            raise NotDense(f"time not strictly increasing after row {self.rows}")
+        if not self.rows:
+            self.first = float(time[0])
+        self.blocks.append(steps)
+        self.rows += time.size
+        self.last = float(time[-1])
+
+    def median(self) -> float:
+        """``np.median(np.diff(time))`` of the whole column, the blocks moved into one array
+        (no second copy: the median partitions it in place)."""
+        joined = np.empty(sum(b.size for b in self.blocks))
+        at = 0
+        while self.blocks:
+            block = self.blocks.pop(0)
+            joined[at : at + block.size] = block
+            at += block.size
+        return float(np.median(joined, overwrite_input=True))
 
 
 def _kept(
@@ -165,10 +197,9 @@ def _stream_body(
     kept: list[str],
     rate_hz: float | None,
     writer: RowSink,
-) -> list[np.ndarray]:
-    """Parse and write the body block by block; the time of each block."""
-    times: list[np.ndarray] = []
-    rows, last = 0, -np.inf
+) -> _Steps:
+    """Parse and write the body block by block; the time base's steps."""
+    steps = _Steps([])
     carry = b""
     while True:
         data = source.read(BLOCK_BYTES)
@@ -181,7 +212,8 @@ def _stream_body(
             continue
         block, carry = buffer[:cut], buffer[cut:]
         if not block:
-            return times
+            return steps
+        rows = steps.rows
         if not block.isascii():
             raise NotDense(f"non-ASCII text after row {rows}")
         got = arrow_block(
@@ -196,14 +228,10 @@ def _stream_body(
                 time = np.arange(rows, rows + count, dtype=np.float64) / rate_hz
             else:
                 time = _joined(values[column])
-            if time[0] <= last or np.any(np.diff(time) <= 0):
-                raise NotDense(f"time not strictly increasing after row {rows}")
+            steps.add(time)
             writer.write(time, [_joined(values[n]) for n in kept])
-            times.append(time)
-            rows += count
-            last = time[-1]
         if not data:
-            return times
+            return steps
 
 
 def _joined(chunks: list[np.ndarray] | None) -> np.ndarray:
