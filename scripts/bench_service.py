@@ -173,7 +173,9 @@ def bulk_round(
     bulk_latencies: list[float] = []
     stop = threading.Event()
     paths = ["/api/runs?limit=5", "/api/datasets"]
-    pollers = [Worker(poller, server.base, paths, stop, bulk_latencies) for _ in range(4)]
+    pollers = [
+        Worker(poller, server.base, paths, stop, bulk_latencies) for _ in range(args.pollers)
+    ]
     for th in pollers:
         th.start()
     t0 = time.perf_counter()
@@ -196,7 +198,7 @@ def bulk_round(
         "estimator_s": round(done["metrics"]["run_s"], 3),
         "total_s": round(t2 - t0, 2),
         "rows_per_s": round(args.rows / (t2 - t0)),
-        **latency_figures("bulk", bulk_latencies),
+        **(latency_figures("bulk", bulk_latencies) if args.pollers else {}),
     }
     return figures, int(dataset["id"])
 
@@ -224,7 +226,7 @@ def live_round(
     latencies: list[float] = []
     stop = threading.Event()
     paths = [f"/api/runs/{live['id']}", "/api/datasets"]
-    pollers = [Worker(poller, server.base, paths, stop, latencies) for _ in range(4)]
+    pollers = [Worker(poller, server.base, paths, stop, latencies) for _ in range(args.pollers)]
     api = psutil.Process(server.process.pid)
     cpu0, t0 = sum(api.cpu_times()[:2]), time.monotonic()
     for th in threads + pollers:
@@ -245,7 +247,7 @@ def live_round(
         "mb_per_s_total": round(sum(b for _, b in counts) / args.live_seconds / 2**20, 2),
         "api_cpu_pct": round(100 * (cpu1 - cpu0) / (t1 - t0), 1),
         "loop_lag_ms": loop_lag_ms,
-        **latency_figures("live", latencies),
+        **(latency_figures("live", latencies) if args.pollers else {}),
     }
     return {f"{key}_{encoding}": value for key, value in figures.items()}
 
@@ -272,6 +274,9 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=5, help="rounds; median and worst")
     parser.add_argument("--deflate", action="store_true", help="MAPWISE_WS_DEFLATE=true")
     parser.add_argument("--timeout", type=float, default=600.0, help="per run, seconds")
+    parser.add_argument(
+        "--pollers", type=int, default=4, help="clients polling the API meanwhile (latency)"
+    )
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     if args.repeat < 1:
