@@ -6,6 +6,7 @@ from __future__ import annotations
 import io
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -13,6 +14,7 @@ from fastapi.testclient import TestClient
 
 from app.cli import main as cli_main
 from app.db.migrate import head_revision
+from estimation.filters.estimator import WINDOW_STEPS
 from tests.support.helpers import (
     TABLE,
     TRUE_MAP,
@@ -471,3 +473,44 @@ def test_csv_export_neutralises_spreadsheet_formulas(client: TestClient) -> None
         f"/api/runs/{run['id']}/export", params={"format": "csv", "part": "series"}
     ).text
     assert "'=HYPERLINK(1)" in series.splitlines()[0]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sensor", [False, True])
+def test_a_streamed_run_over_several_windows_equals_mapwise_adapt(
+    client: TestClient, sensor: bool, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A log of 2.5 windows (docs/data-formats.md#streamed-runs): uploaded as a streamed CSV
+    (over 16 MiB), run a window at a time from the store, its final map is the one
+    `mapwise adapt` makes holding the log whole, bit for bit — across the windows' seams
+    and with a sensor delay whose rows each window reads past its end."""
+    text = log_csv(WINDOW_STEPS * 5 // 2, seed=4, rate_hz=100.0)
+    assert len(text) > 16 * 2**20
+    path = tmp_path / "log.csv"
+    path.write_text(text)
+    dataset = upload_ok(client, text)
+    options: dict[str, Any] = {"sigma_v": 0.05, "sigma_w": 0.01, "p0": 10.0}
+    flags = [f"--{k.replace('_', '-')}={v}" for k, v in options.items()]
+    if sensor:
+        options["sensor"] = {"lag": 0.5, "delay_samples": 3, "sigma_f": 0.01}
+        flags += ["--lag=0.5", "--delay-samples=3", "--sigma-f=0.01"]
+    body = {
+        "dataset_id": dataset["id"],
+        "estimator": "skf",
+        "signals": {"y": "y"},
+        "table": TABLE,
+        "config": options,
+    }
+    done = wait_run(client, start_run(client, body)["id"])
+    assert done["status"] == "succeeded", done["error"]
+    axes = ["--axis", "u1=" + ",".join(map(str, U1)), "--axis", "u2=" + ",".join(map(str, U2))]
+    argv = ["adapt", str(path), "--estimator", "skf", *axes, "--y", "y", *flags, "--json"]
+    assert cli_main(argv) == 0
+    expected = json.loads(capsys.readouterr().out)
+    got = final_values(client, done["id"])
+    expected.pop("timing")
+    got.pop("timing")
+    assert got == expected
+    metrics = client.get(f"/api/runs/{done['id']}").json()["metrics"]
+    assert metrics["samples"] == WINDOW_STEPS * 5 // 2
+    assert metrics["holdout:samples"] > 0
