@@ -248,14 +248,18 @@ def holdout_error_windows(
     unit: str,
     fraction: float = DEFAULT_FIT_FRACTION,
     window: int = WINDOW_STEPS,
+    timeline: Callable[[], np.ndarray] | None = None,
 ) -> HoldoutResult:
     """:func:`holdout_error` of a log of ``n`` samples that is never held whole (every
     sample accepted): ``read(a, z)`` gives its rows ``a … z−1``, read ``window`` at a time,
-    once for the fit and once for the prediction. The statistics are running sums, equal to
-    :func:`holdout_error`'s up to rounding (``tests/estimation/test_holdout.py``)."""
+    once for the fit and once for the prediction; ``timeline()`` its time column, read only
+    for a delay in seconds (as :meth:`TableFilter.run_windows`). The statistics are running
+    sums, equal to :func:`holdout_error`'s up to rounding
+    (``tests/estimation/test_holdout.py``)."""
     m = split_point(n, fraction)
     filt = map_filter(estimator, config)
-    sums, state, settings = _fit_windows(filt, read, m, window)
+    first_m = (lambda: timeline()[:m]) if timeline is not None else (lambda: read(0, m).time)
+    sums, state, settings = _fit_windows(filt, read, m, window, filt.settings_on(m, first_m))
     delay = settings.delay
     if m - delay < 1 or n - m < 1:
         raise ConfigError(
@@ -293,11 +297,14 @@ def holdout_error_windows(
 
 
 def _fit_windows(
-    filt: TableFilter, read: Callable[[int, int], Signals], m: int, window: int
+    filt: TableFilter,
+    read: Callable[[int, int], Signals],
+    m: int,
+    window: int,
+    settings: FilterSettings,
 ) -> tuple[InnovationSums, FilterState, FilterSettings]:
-    """:func:`run_innovations` over rows ``0 … m−1``, a window at a time, keeping the sums
-    of the accepted innovations instead of the series."""
-    settings = filt.settings_for(read(0, min(m, window)))
+    """:func:`run_innovations` over rows ``0 … m−1`` with ``settings``, a window at a time,
+    keeping the sums of the accepted innovations instead of the series."""
     tau = settings.delay
     if tau >= m:
         raise ConfigError(f"sensor delay of {tau} samples is not shorter than the log ({m})")

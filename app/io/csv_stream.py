@@ -30,6 +30,7 @@ from app.io.csv_arrow import arrow_block
 from app.io.csv_files import CsvHeader, read_header
 from app.io.csv_sniff import head_lines
 from app.io.csv_upload import BINARY, reject_unknown_delimiter
+from app.io.ingest import BINARY_BYTES
 from app.io.names import bad_character
 
 STREAM_MIN_BYTES = 16 << 20  # a smaller file is read whole: it costs little either way
@@ -111,7 +112,7 @@ def stream_csv(
         max_columns=max_channels + 1,
         empty_is_missing=False,
     )
-    kept = _kept(header.names, header.time_column, channels, rate_hz)
+    kept = _kept(header.names, header.time_column, channels, rate_hz, max_channels)
     notes = ["decimal comma"] if header.decimal == "," else []
     if header.time_column is None:
         notes.append(f"no time column: rows taken at the given rate of {rate_hz:g} Hz")
@@ -171,7 +172,11 @@ class _Steps:
 
 
 def _kept(
-    names: list[str], time_column: str | None, wanted: Sequence[str] | None, rate_hz: float | None
+    names: list[str],
+    time_column: str | None,
+    wanted: Sequence[str] | None,
+    rate_hz: float | None,
+    max_channels: int,
 ) -> list[str]:
     """The channels to store, in the order a whole read gives them."""
     if (time_column is None) == (rate_hz is None):
@@ -188,6 +193,8 @@ def _kept(
             raise NotDense("a channel asked for that the file does not have")
     if not kept:
         raise NotDense("no channel besides the time")
+    if len(kept) > max_channels:
+        raise NotDense(f"{len(kept)} channels, over the limit")
     return kept
 
 
@@ -216,6 +223,8 @@ def _stream_body(
         rows = steps.rows
         if not block.isascii():
             raise NotDense(f"non-ASCII text after row {rows}")
+        if BINARY_BYTES.search(block):  # a control character, even in a comment line
+            raise NotDense(f"a control character after row {rows}")
         got = arrow_block(
             block, header.delimiter, header.names, header.must, header.decimal, frozenset()
         )

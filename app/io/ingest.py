@@ -48,7 +48,7 @@ if TYPE_CHECKING:
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 MDF_MAGIC = b"MDF     "
 # Bytes that never occur in a text log: NUL and the C0 controls other than tab, LF, FF, CR.
-_BINARY = re.compile(rb"[\x00-\x08\x0b\x0e-\x1f\x7f]")
+BINARY_BYTES = re.compile(rb"[\x00-\x08\x0b\x0e-\x1f\x7f]")
 
 
 @dataclass(frozen=True, slots=True)
@@ -113,7 +113,7 @@ def detect_format(head: bytes) -> str:
         return "mdf4"
     if not head:
         raise InputError("empty file", field="file")
-    if _BINARY.search(head[:4096]):
+    if BINARY_BYTES.search(head[:4096]):
         raise unsupported(
             "binary data that is neither MCAP nor MDF4 (and not CSV text); "
             "upload a CSV, MCAP or MDF4 file"

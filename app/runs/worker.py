@@ -271,8 +271,9 @@ class RunSession:
                 results.signals, every=every, state=self.state, accept=self.accept
             )
         assert isinstance(self.estimator, TableFilter)
+        log = results.log
         return self.estimator.run_windows(
-            results.log.rows, results.n, every=every, state=self.state
+            log.rows, results.n, every=every, state=self.state, timeline=log.time
         )
 
     def _check_stop(self, snap: Snapshot) -> None:

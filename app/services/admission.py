@@ -16,13 +16,14 @@ and of a streamed run (a map filter reading its log a window at a time from the 
 :func:`app.runs.options.streams_input`), with ``w = min(n, STREAM_ROWS)`` the rows it holds::
 
     WORKER_BASE_BYTES + (1 + h) · cost.memory_bytes(p, w, c) + 2 · 8 · channels · w
-        + (8 · outputs + 1) · n
+        + (8 · outputs + 11) · n
 
 the worker process itself, the estimator's declared cost for the run and for its held-out
 refit (``h = cost.holdout_passes``: 1, or 0 for an estimator without a truth-free check,
 since the refit runs while the run's own data are held), and the dataset (its Parquet object
 as read from the artifact store, and the unpacked channels); a streamed run keeps only its
-per-sample outputs and status codes for the whole log. The compute time counts the
+per-sample outputs and status codes for the whole log, and at its end the RMSE's copy of
+the accepted residuals. The compute time counts the
 refit's work the same way.
 """
 
@@ -42,6 +43,9 @@ OPS_PER_S_CEILING = 1e10
 """More arithmetic a second than one core does: ``work / OPS_PER_S_CEILING`` is a lower
 bound on a run's duration, so only runs that cannot finish in the budget are refused."""
 FLOAT_BYTES = 8
+STREAM_SAMPLE_BYTES = 11
+"""What a streamed run keeps per sample besides its outputs: the status code (1 byte), and at
+its end the RMSE's copy of the accepted residuals (8) and its two masks (2)."""
 STREAM_ROWS = 1 << 20
 """Rows a streamed run holds at most: its window (``WINDOW_STEPS`` of
 :mod:`estimation.filters.estimator`), the decoded row groups it caches
@@ -147,7 +151,7 @@ def admit_run(
     held = min(samples, STREAM_ROWS) if streamed else samples  # rows in memory at once
     data = FLOAT_BYTES * 2 * channels * held
     if streamed:
-        data += (FLOAT_BYTES * len(spec.output_units) + 1) * samples  # outputs, status codes
+        data += (FLOAT_BYTES * len(spec.output_units) + STREAM_SAMPLE_BYTES) * samples
     memory = WORKER_BASE_BYTES + cost.run_memory_bytes(cells, held, corners=corners) + data
     if memory > limits.run_memory_bytes:
         grows_with_table = cost.run_memory_bytes(cells, 0, corners=corners) > data

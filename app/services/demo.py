@@ -50,6 +50,7 @@ def seed_demo(settings: Settings) -> int:
                 name="Demo: NOx drive, 150 s at 50 Hz (example_nox.csv)",
                 units=None,
                 max_bytes=settings.max_upload_bytes,
+                max_whole_bytes=settings.max_whole_bytes,
             )
         context = WorkerContext(database_url=db.url, store_url=settings.store_url)
         runs = RunService(db, settings, _RunNow(context))

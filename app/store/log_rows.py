@@ -38,6 +38,11 @@ class LogRows(Protocol):
 
     def rows(self, a: int, z: int) -> Signals: ...
 
+    def time(self) -> np.ndarray:
+        """The whole time column (8 bytes a sample): a delay in seconds needs the log's
+        sample period."""
+        ...
+
 
 class MemoryRows:
     """Rows of a log held whole."""
@@ -52,6 +57,9 @@ class MemoryRows:
         s = self.signals
         channels = {name: s[name][a:z] for name in self.names}
         return Signals(s.time[a:z], channels, self.units, copy=False)
+
+    def time(self) -> np.ndarray:
+        return self.signals.time
 
 
 class StoredRows:
@@ -87,19 +95,29 @@ class StoredRows:
         channels = dict(zip(self.names, arrays[1:], strict=True))
         return Signals(arrays[0], channels, self.units, copy=False)
 
+    def time(self) -> np.ndarray:
+        """The time column, read a row group at a time past the cache (only it decoded)."""
+        out = np.empty(self.n)
+        for g in range(len(self.starts) - 1):
+            out[self.starts[g] : self.starts[g + 1]] = self._decode(g, [self.file.time_name])[0]
+        return out
+
     def _group(self, g: int) -> list[np.ndarray]:
         if g in self.cache:
             self.cache.move_to_end(g)
             return self.cache[g]
-        try:
-            table = self.file.reader.read_row_group(g, columns=self.fields, use_threads=False)
-            arrays = [_floats(table.column(k)) for k in range(len(self.fields))]
-        except (OSError, ValueError, pa.ArrowException) as exc:
-            raise ArtifactCorruptError(f"row group {g} cannot be decoded: {exc}") from exc
+        arrays = self._decode(g, self.fields)
         self.cache[g] = arrays
         while len(self.cache) > CACHED_GROUPS:
             self.cache.popitem(last=False)
         return arrays
+
+    def _decode(self, g: int, fields: list[str]) -> list[np.ndarray]:
+        try:
+            table = self.file.reader.read_row_group(g, columns=fields, use_threads=False)
+            return [_floats(table.column(k)) for k in range(len(fields))]
+        except (OSError, ValueError, pa.ArrowException) as exc:
+            raise ArtifactCorruptError(f"row group {g} cannot be decoded: {exc}") from exc
 
 
 def _floats(column: pa.ChunkedArray) -> np.ndarray:

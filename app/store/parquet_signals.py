@@ -59,12 +59,20 @@ class SignalsWriter:
     :data:`ROW_GROUP_ROWS` rows, so the file does not depend on how its rows arrived, and
     the row count is put in the metadata when the file is closed (:meth:`close`)."""
 
-    def __init__(self, path: str | os.PathLike[str], channels: Sequence[tuple[str, str]]):
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        channels: Sequence[tuple[str, str]],
+        rows: int | None = None,
+    ) -> None:
         self.path = path
         time_name = _time_field_name([Column(n, u, np.empty(0)) for n, u in channels])
         fields = [_field(time_name, "s", "time")] + [_field(n, u, "channel") for n, u in channels]
         self.meta = {"format": FORMAT, "time": time_name}
-        self.schema = pa.schema(fields, metadata={SCHEMA_KEY: json.dumps(self.meta).encode()})
+        # rows known up front go into the schema too, where readers before the streamed
+        # upload look for them; a streamed file has them only in the file's metadata
+        known = self.meta if rows is None else self.meta | {"rows": rows}
+        self.schema = pa.schema(fields, metadata={SCHEMA_KEY: json.dumps(known).encode()})
         self.writer = pq.ParquetWriter(path, self.schema, compression="zstd", use_dictionary=False)
         self.pending: list[list[np.ndarray]] = []  # blocks not yet in a row group
         self.buffered = 0
@@ -106,7 +114,7 @@ def write_columns(
     path: str | os.PathLike[str], time: np.ndarray, channels: Sequence[Column]
 ) -> str:
     """Write the file at ``path``; returns the SHA-256 (hex) of its bytes."""
-    writer = SignalsWriter(path, [(c.name, c.unit) for c in channels])
+    writer = SignalsWriter(path, [(c.name, c.unit) for c in channels], rows=int(time.size))
     for start in range(0, time.size, ROW_GROUP_ROWS):
         stop = start + ROW_GROUP_ROWS
         writer.write(time[start:stop], [c.values[start:stop] for c in channels])

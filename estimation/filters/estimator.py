@@ -143,10 +143,14 @@ class TableFilter(ChunkedEstimator[FilterState, Prepared]):
             total=total,
         )
 
+    def needs_period(self) -> bool:
+        """A sensor delay given in seconds: the log's sample period turns it into samples."""
+        sensor = getattr(self.config, "sensor", None)
+        return bool(sensor is not None and sensor.delay_samples is None and sensor.delay_s)
+
     def settings_for(self, signals: Signals) -> FilterSettings:
         """The kernel settings on a log: a delay in seconds needs its sample period."""
-        sensor = getattr(self.config, "sensor", None)
-        needs_period = sensor is not None and sensor.delay_samples is None and sensor.delay_s
+        needs_period = self.needs_period()
         if needs_period and len(signals) < 2:
             raise ConfigError("sensor.delay_s needs at least two samples to know the rate")
         period = signals.sample_period() if needs_period else None
@@ -160,23 +164,24 @@ class TableFilter(ChunkedEstimator[FilterState, Prepared]):
         every: int,
         state: FilterState | None = None,
         window: int = WINDOW_STEPS,
+        timeline: Callable[[], np.ndarray] | None = None,
     ) -> Iterator[Snapshot]:
         """:meth:`run` over a log of ``n`` samples that is never held whole.
 
         ``read(a, z)`` gives the log's rows ``a … z−1`` (its time and the channels the filter
         reads). The filter reads ``window`` kernel steps at a time, rounded up to whole chunks
-        of ``every`` steps counted from where the run starts, each window with the τ rows
-        after it that its last measurements need (sensor delay). The kernel carries its state
-        across windows as across chunks, so snapshots, states and outputs are :meth:`run`'s
-        bit for bit (``tests/estimation/test_run_windows.py``). Each window resolves the
-        settings on its own rows (a delay in seconds needs its sample period); a delay that
-        comes out different along the log is a :class:`ConfigError`, as a varying sample
-        period is for :meth:`run`.
+        of ``every`` steps counted from where the run starts (a resumed run reads from its
+        state's step on), each window with the τ rows after it that its last measurements
+        need (sensor delay). The kernel carries its state across windows as across chunks,
+        so snapshots, states and outputs are :meth:`run`'s bit for bit
+        (``tests/estimation/test_run_windows.py``). A delay in seconds is resolved, as by
+        :meth:`run`, on the whole log's sample period: ``timeline()`` gives its time column
+        (default: ``read(0, n).time``, the log read whole once).
         """
         chunk = int(every)
         if chunk < 1:
             raise ConfigError(f"every must be >= 1 sample, got {every}")
-        settings = self.settings_for(read(0, min(n, window)))
+        settings = self.settings_on(n, timeline or (lambda: read(0, n).time))
         tau = settings.delay
         if tau >= n:
             raise ConfigError(f"sensor delay of {tau} samples is not shorter than the log ({n})")
@@ -184,14 +189,7 @@ class TableFilter(ChunkedEstimator[FilterState, Prepared]):
         span = max(1, -(-window // chunk)) * chunk
 
         def prepared(a: int, z: int) -> Prepared:
-            rows = read(a, min(z + tau, n))
-            own = self.settings_for(rows)
-            if own.delay != tau:
-                raise ConfigError(
-                    f"the sensor delay is {own.delay} samples from row {a} on, {tau} before: "
-                    "the log's sample period changes"
-                )
-            return self.prepare(rows, window=(a, n, settings))
+            return self.prepare(read(a, min(z + tau, n)), window=(a, n, settings))
 
         if state is None:
             state = self.initial_state(prepared(0, min(span, steps)))
@@ -207,6 +205,16 @@ class TableFilter(ChunkedEstimator[FilterState, Prepared]):
                 start = state.step
                 state, outputs, status = self.advance(state, part, min(start + chunk, end))
                 yield self.snapshot(state, part, start, outputs, status)
+
+    def settings_on(self, n: int, timeline: Callable[[], np.ndarray]) -> FilterSettings:
+        """:meth:`settings_for` a log of ``n`` samples whose time column ``timeline()`` gives,
+        read only when a delay in seconds needs the sample period."""
+        if not self.needs_period():
+            return resolve_settings(self.config, self.grid)
+        time = timeline()
+        if time.size != n:
+            raise ConfigError(f"the time column has {time.size} samples, the log {n}")
+        return self.settings_for(Signals(time, {}, copy=False))
 
     def initial_state(self, prepared: Prepared) -> FilterState:
         y_m0 = float(prepared.y[0]) if prepared.settings.has_sensor else None

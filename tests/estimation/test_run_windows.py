@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from estimation.errors import ConfigError, SignalError
+from estimation.errors import SignalError
 from estimation.estimator import Snapshot
 from estimation.filters.estimator import TableFilter
 from estimation.registry import get_spec
@@ -78,7 +78,11 @@ def test_windows_give_the_whole_log_run_bit_for_bit(kind: str, sensor: str) -> N
     signals = problem.signals()
     whole = list(_filter(kind, config).run(signals, every=97))
     read = Reader(signals)
-    windowed = list(_filter(kind, config).run_windows(read, N, every=97, window=400))
+    windowed = list(
+        _filter(kind, config).run_windows(
+            read, N, every=97, window=400, timeline=lambda: signals.time
+        )
+    )
     assert len(windowed) == len(whole)
     for a, b in zip(whole, windowed, strict=True):
         _same(a, b)
@@ -109,21 +113,58 @@ def test_a_resumed_windowed_run_continues_as_the_whole_log_run(kind: str) -> Non
     assert done[0].outputs["prediction"].size == 0
 
 
-def test_a_sample_period_that_changes_along_the_log_is_refused() -> None:
+def _jittered(seed: int, n: int) -> Signals:
+    """50 Hz with ±10 µs of timestamp jitter: 0.75 s is 37.5 samples, the rounding's tie."""
+    problem = random_problem(seed, n=n, sensor=Sensor(0.6, 3, 0.05))
+    signals = problem.signals()
+    rng = np.random.default_rng(seed)
+    time = signals.time + rng.uniform(-1e-5, 1e-5, n)
+    return Signals(time, {name: signals[name] for name in signals.names}, signals.units)
+
+
+@pytest.mark.parametrize("seed", [2, 3, 4])
+def test_a_delay_in_seconds_is_resolved_on_the_whole_log_as_by_run(seed: int) -> None:
+    """Each window's own median step would round 0.75 s to 37 or 38 samples; the windows
+    take the whole log's, from its time column (``timeline``), so the run is ``run``'s."""
+    signals = _jittered(seed, N)
+    config = random_problem(seed, n=N, sensor=Sensor(0.6, 3, 0.05)).config("skf")
+    config["sensor"] = {**config["sensor"], "delay_samples": None, "delay_s": 0.75}
+    whole = list(_filter("skf", config).run(signals, every=100))
+    read = Reader(signals)
+    windowed = list(
+        _filter("skf", config).run_windows(
+            read, N, every=100, window=300, timeline=lambda: signals.time
+        )
+    )
+    for a, b in zip(whole, windowed, strict=True):
+        _same(a, b)
+    assert max(z - a for a, z in read.calls) < N  # the time column aside, never read whole
+
+
+def test_a_one_row_last_window_and_a_finished_state_need_no_sample_period() -> None:
+    problem = random_problem(14, n=601, sensor=Sensor(0.6, 0, 0.05))
+    config = problem.config("skf")
+    config["sensor"] = {**config["sensor"], "delay_samples": None, "delay_s": 0.001}  # τ = 0
+    signals = problem.signals()
+    whole = list(_filter("skf", config).run(signals, every=100))
+    windowed = list(_filter("skf", config).run_windows(Reader(signals), 601, every=100, window=600))
+    for a, b in zip(whole, windowed, strict=True):
+        _same(a, b)
+    done = list(
+        _filter("skf", config).run_windows(Reader(signals), 601, every=100, state=whole[-1].state)
+    )
+    assert [d.sample for d in done] == [601]
+
+
+def test_a_sample_period_that_varies_is_refused_as_by_run() -> None:
     problem = random_problem(13, n=N, sensor=Sensor(0.6, 3, 0.05))
     config = problem.config("skf")
-    config["sensor"] = {**config["sensor"], "delay_samples": None, "delay_s": 0.0701}
+    config["sensor"] = {**config["sensor"], "delay_samples": None, "delay_s": 0.06}
     signals = problem.signals()
     uneven = np.concatenate([signals.time[:2000], signals.time[1999] + 0.04 * np.arange(1, 1001)])
     slowed = Signals(uneven, {n: signals[n] for n in signals.names}, signals.units)
-    with pytest.raises(SignalError, match="not uniformly sampled"):
+    with pytest.raises(SignalError) as whole:
         list(_filter("skf", config).run(slowed, every=100))
-    with pytest.raises(SignalError, match="not uniformly sampled"):  # in the window with it
+    with pytest.raises(SignalError) as windowed:
         list(_filter("skf", config).run_windows(Reader(slowed), N, every=100, window=500))
-    # 50 Hz, then 49.75 Hz: uniform within 1 % throughout, but 0.0701 s is 4 samples at the
-    # first rate and 3 at the second; the whole log takes the median's, a window its own
-    drift = np.concatenate([signals.time[:2000], signals.time[1999] + 0.0201 * np.arange(1, 1001)])
-    drifting = Signals(drift, {n: signals[n] for n in signals.names}, signals.units)
-    list(_filter("skf", config).run(drifting, every=100))
-    with pytest.raises(ConfigError, match="sample period changes"):
-        list(_filter("skf", config).run_windows(Reader(drifting), N, every=100, window=2000))
+    assert str(windowed.value) == str(whole.value)

@@ -120,6 +120,7 @@ def upload_dataset(
         name=name,
         units=_units(units),
         max_bytes=services.settings.max_upload_bytes,
+        max_whole_bytes=services.settings.max_whole_bytes,
         max_decompressed_bytes=services.settings.max_decompressed_bytes,
         channels=_channels(channels),
         raster=raster,

@@ -169,6 +169,20 @@ def test_file_too_large_is_413_and_stores_nothing(
     assert small.status_code == 201
 
 
+def test_the_whole_read_limit_holds_through_the_api(database_url: str) -> None:
+    """MAPWISE_MAX_WHOLE_MB bounds what is read whole even when MAPWISE_MAX_UPLOAD_MB is
+    larger (a file under 16 MiB, an MCAP or MDF file, a CSV that cannot stream)."""
+    settings = service_settings(database_url, max_upload_mb=1, max_whole_mb=0.01)
+    with TestClient(create_app(settings, execute_runs=False)) as client:
+        before = _count(database_url)
+        big = b"time,a\n" + b"".join(f"{k},{k}\n".encode() for k in range(3000))  # ~20 KB
+        response = upload(client, big)
+        assert response.status_code == 413
+        assert response.json()["error"]["code"] == "payload_too_large"
+        assert _count(database_url) == before
+        assert upload(client, b"time,a\n0,1\n1,2\n").status_code == 201
+
+
 @pytest.fixture(scope="module")
 def measurement_mf4(tmp_path_factory: pytest.TempPathFactory) -> bytes:
     from tests.support.measurements import write_measurement

@@ -2,10 +2,10 @@
 
 Every file is uploaded twice through :class:`DatasetService`: once streamed (no size floor)
 and once read whole (a floor above its size). The two datasets must agree in every field,
-and their stored files byte for byte (both are written by ``SignalsWriter`` in row groups
-of the same size); a file the stream does not take must come out of both uploads the same,
-stored or refused with the same message. Blocks are made small so that every file crosses
-several block boundaries.
+and their stored files in rows, row groups and every value bit for bit (the streamed file
+has its row count only in the file's metadata, so the bytes differ there); a file the
+stream does not take must come out of both uploads the same, stored or refused with the
+same message. Blocks are made small so that every file crosses several block boundaries.
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ from app.io.csv_stream import NotDense, stream_csv
 from app.io.errors import InputError
 from app.services.datasets import DatasetService
 from app.store import open_store, open_verified
-from app.store.parquet_signals import SignalsWriter
+from app.store.parquet_signals import SignalsFile, SignalsWriter
 
 ROOT = Path(__file__).resolve().parents[3]
 ROWS = 3000
@@ -82,12 +82,22 @@ def _upload(service: DatasetService, data: bytes, *, streamed: bool, **kw: objec
     )
 
 
-def _stored(service: DatasetService, dataset: Dataset) -> bytes:
-    """The stored object's bytes (checked against the row's hash)."""
+def _stored(service: DatasetService, dataset: Dataset) -> tuple:
+    """The stored object, decoded (checked against the row's hash): rows, row groups, time
+    and every channel's name, unit and values as bytes (bit for bit)."""
     with service.db.read() as s:
         stored = DatasetRepo(s).samples(dataset.id)
     with open_verified(service.store, dataset.id, stored.key, stored.sha256) as f:
-        return f.read()
+        file = SignalsFile.open(f)
+        meta = file.reader.metadata
+        groups = [meta.row_group(g).num_rows for g in range(meta.num_row_groups)]
+        time, columns = file.read()
+    return (
+        file.rows,
+        groups,
+        time.tobytes(),
+        [(c.name, c.unit, c.values.tobytes()) for c in columns],
+    )
 
 
 def _same(service: DatasetService, data: bytes, **kw: object) -> Dataset:
@@ -170,6 +180,9 @@ FALLBACKS: dict[str, Callable[[], bytes]] = {
     "time going back": lambda: _text(np.vstack([_rows()[:10], _rows()[5:]])).encode(),
     "a nan time": _nan,
     "Latin-1": lambda: _text(_rows(), "time [s],T [°C],q,z").encode("latin-1"),
+    "a control character in a late comment": lambda: (
+        _text(_rows(), comment_every=1000).encode().replace(b"# marker 2000", b"# marker\x01 2000")
+    ),
 }
 
 
@@ -178,6 +191,7 @@ def test_a_file_that_cannot_stream_is_read_whole_with_the_same_outcome(
     service: DatasetService, case: str, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     monkeypatch.setattr("app.io.csv_stream.BLOCK_BYTES", 4096)
+    monkeypatch.setattr("app.io.csv_stream.HEAD_BYTES", 8192)  # the cases lie past the head
     data = FALLBACKS[case]()
     with pytest.raises(NotDense):
         _stream(data)
@@ -189,6 +203,24 @@ def test_a_file_that_cannot_stream_is_read_whole_with_the_same_outcome(
         except InputError as exc:
             outcomes.append((None, (exc.field, str(exc))))
     assert outcomes[0] == outcomes[1]
+
+
+def test_more_channels_than_the_limit_do_not_stream() -> None:
+    """Without a time column every column is a channel: the limit counts them all."""
+    header = ",".join(f"c{j}" for j in range(101))
+    data = (header + "\n" + "".join(",".join(["1"] * 101) + "\n" for _ in range(30))).encode()
+    with pytest.raises(NotDense, match="channels"):
+        stream_csv(
+            io.BytesIO(data),
+            lambda channels: SignalsWriter(os.devnull, channels),
+            units=None,
+            time_column=None,
+            channels=None,
+            rate_hz=10.0,
+            max_header_bytes=65536,
+            max_channels=100,
+            min_samples=2,
+        )
 
 
 def test_a_file_over_the_whole_read_limit_streams_or_is_refused_saying_why(
@@ -223,7 +255,7 @@ def hwm():
             return int(line.split()[1]) // 1024
 from app.io.csv_stream import stream_csv
 from app.io.ingest import ingest
-from app.store.parquet_signals import SignalsWriter
+from app.store.parquet_signals import SignalsFile, SignalsWriter
 path, mode = sys.argv[1], sys.argv[2]
 ingest(b"time,a\\n0,1\\n1,2\\n")  # imports and pyarrow's pools before the baseline
 Path("/proc/self/clear_refs").write_text("5")

@@ -16,6 +16,7 @@ from app.domain import Channel, Dataset
 from app.errors import InvalidRequestError
 from app.services.admission import (
     STREAM_ROWS,
+    STREAM_SAMPLE_BYTES,
     WORKER_BASE_BYTES,
     GroupBudget,
     Limits,
@@ -126,18 +127,20 @@ def test_a_huge_log_is_refused_by_memory_naming_the_dataset() -> None:
 
 
 def test_a_streamed_run_is_predicted_from_its_window_and_its_outputs() -> None:
-    """A map filter on an uploaded log holds a window of it (STREAM_ROWS rows) and its
-    outputs and status codes for every sample (17 bytes): 10 M samples fit a budget the
-    same run holding its log whole does not (docs/reliability.md)."""
+    """A map filter on an uploaded log holds a window of it (STREAM_ROWS rows) and, for
+    every sample, its outputs, status code and final RMSE copy (27 bytes): 10 M samples fit
+    a budget the same run holding its log whole does not (docs/reliability.md)."""
     with pytest.raises(OverBudgetError, match="run budget"):
         _admit("skf", 216, samples=10_000_000)
     streamed = _admit("skf", 216, samples=10_000_000, streamed=True)
     spec = get_spec("skf")
-    kept = (8 * len(spec.output_units) + 1) * 10_000_000
+    kept = (8 * len(spec.output_units) + STREAM_SAMPLE_BYTES) * 10_000_000
     window = spec.cost.run_memory_bytes(216, STREAM_ROWS, corners=4) + 16 * 4 * STREAM_ROWS
     assert streamed.memory_bytes == WORKER_BASE_BYTES + window + kept
     short = _admit("skf", 216, samples=1000, streamed=True).memory_bytes
-    assert short - _admit("skf", 216, samples=1000).memory_bytes == 17 * 1000
+    assert (
+        short - _admit("skf", 216, samples=1000).memory_bytes == (16 + STREAM_SAMPLE_BYTES) * 1000
+    )
 
 
 def test_versions_over_budget_suggest_a_cadence() -> None:
