@@ -210,17 +210,7 @@ def test_more_channels_than_the_limit_do_not_stream() -> None:
     header = ",".join(f"c{j}" for j in range(101))
     data = (header + "\n" + "".join(",".join(["1"] * 101) + "\n" for _ in range(30))).encode()
     with pytest.raises(NotDense, match="channels"):
-        stream_csv(
-            io.BytesIO(data),
-            lambda channels: SignalsWriter(os.devnull, channels),
-            units=None,
-            time_column=None,
-            channels=None,
-            rate_hz=10.0,
-            max_header_bytes=65536,
-            max_channels=100,
-            min_samples=2,
-        )
+        _stream(data, rate_hz=10.0)
 
 
 def test_a_file_over_the_whole_read_limit_streams_or_is_refused_saying_why(
