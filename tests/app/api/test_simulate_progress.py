@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 from fastapi.testclient import TestClient
 
 from estimation.plants import airpath
@@ -23,6 +24,7 @@ def _parse(text: str) -> list[dict]:
     return [json.loads(line) for line in text.splitlines()]
 
 
+@pytest.mark.slow  # a full simulation streamed: 9 s
 def test_progress_rises_then_the_dataset_arrives(client: TestClient) -> None:
     # The plant run is cached per process by its inputs (not the seed); an earlier test in
     # this worker may have simulated the same cycle, and a cached run has nothing to count.

@@ -64,6 +64,7 @@ def _cells(stdout: str, label: str) -> list[str]:
     return [c.strip() for c in line.strip().strip("|").split("|")][1:]
 
 
+@pytest.mark.slow  # a whole reproduce of the paper forms: 20 s, the fast lane's longest test
 def test_the_literal_paper_forms_run_beside_the_modified_ones(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
