@@ -33,6 +33,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import statistics
 import sys
 import tempfile
@@ -288,7 +289,10 @@ def main() -> None:
     url = args.database_url or f"sqlite:///{work / 'bench.db'}"
     log_path = work / "log.csv"
     make_log(log_path, args.rows)
-    env = {"MAPWISE_WS_DEFLATE": "true" if args.deflate else "false"}
+    env = {
+        "MAPWISE_WS_DEFLATE": "true" if args.deflate else "false",
+        "MAPWISE_STORE_URL": (work / "store").as_uri(),  # removed with the rest at the end
+    }
     server = Server(url, workers=None, env=env)
     result: dict[str, Any] = {
         "rows": args.rows,
@@ -321,6 +325,7 @@ def main() -> None:
         result["server_peak_rss_mb"] = peak_rss_mb(server.process.pid)
     finally:
         server.stop()
+        shutil.rmtree(work, ignore_errors=True)
     result |= summarise(rounds)
     if args.json:
         print(json.dumps(result))
