@@ -87,9 +87,21 @@ export async function mount(root, ctx) {
     try {
       applyRun(s, await api.get(`/api/runs/${id}`, { signal: ctx.signal }));
       v.meta.render();
+      whenDone();
     } catch {
       /* transient */
     }
+  }
+
+  /* Once the run is done its stored series replace the live ones, whichever of the status
+   * frame, a full frame or the poll of the run says so first (the poll may set the status
+   * before the frame comes, and the frame then changes nothing). */
+  let storedSeries = false;
+  function whenDone() {
+    if (RUN_ACTIVE.has(s.run.status)) storedSeries = false; // resumed: load them again at its end
+    if (storedSeries || !RUN_DONE.has(s.run.status)) return;
+    storedSeries = true;
+    loadStoredSeries();
   }
 
   /** A finished run's stored series cover the whole log (the live ones may have gaps). */
@@ -134,14 +146,15 @@ export async function mount(root, ctx) {
     applyFull(s, msg);
     v.meta.render();
     if (RUN_DONE.has(s.run.status)) refreshVersions();
+    whenDone();
   };
   const onStatus = (msg) => {
     const before = applyStatus(s, msg);
     v.meta.render();
+    whenDone();
     if (before === msg.status) return;
     refreshRun();
     refreshVersions();
-    if (RUN_DONE.has(msg.status)) loadStoredSeries();
     if (msg.status === "succeeded") toast(`Run #${id} finished.`);
     if (msg.status === "failed")
       toast(`Run #${id} failed: ${msg.error ?? "see the error above"}`, { error: true });
