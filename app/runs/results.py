@@ -353,7 +353,7 @@ class RunResults:
         for a in range(0, self.n, SERIES_WINDOW):
             z = min(a + SERIES_WINDOW, self.n)
             part = self.lines(a, z)
-            buckets.add(self.log.rows(a, z).time, {x.name: x.values for x in part})
+            buckets.add(part[0].time, {x.name: x.values for x in part})
         time_s, values = buckets.result()
         return [Series(x.name, x.unit, time_s, values[x.name], x.role) for x in shape]
 

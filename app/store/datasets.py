@@ -143,6 +143,39 @@ def open_verified(
         yield f
 
 
+@contextlib.contextmanager
+def open_signals(
+    store: ArtifactStore,
+    dataset_id: int,
+    key: str,
+    sha256: str,
+    *,
+    expect: Sequence[str] | None = None,
+) -> Iterator[SignalsFile]:
+    """The verified object (:func:`open_verified`) opened as a :class:`SignalsFile`: one that
+    cannot be decoded, or whose channels are not exactly ``expect`` in that order, raises
+    :class:`ArtifactCorruptError` (right hash, wrong content: written by a bad writer)."""
+    with open_verified(store, dataset_id, key, sha256) as f:
+        try:
+            file = SignalsFile.open(f)
+        except (ValueError, OSError, pa.ArrowException) as exc:
+            raise _undecodable(dataset_id, key, exc) from exc
+        stored = [name for name, _ in file.channels]
+        if expect is not None and stored != list(expect):
+            raise ArtifactCorruptError(
+                f"dataset {dataset_id}: its samples {key} hold channels {stored}, "
+                f"not the dataset's {list(expect)}",
+                field="dataset_id",
+            )
+        yield file
+
+
+def _undecodable(dataset_id: int, key: str, exc: Exception) -> ArtifactCorruptError:
+    return ArtifactCorruptError(
+        f"dataset {dataset_id}: its samples {key} cannot be decoded: {exc}", field="dataset_id"
+    )
+
+
 def load_columns(
     store: ArtifactStore,
     dataset_id: int,
@@ -155,23 +188,11 @@ def load_columns(
     """The verified object's time and channel columns: those in ``names`` (default all), in
     the file's order, the others never read. With ``expect``, the file's channels must be
     exactly those names in that order (ArtifactCorruptError otherwise)."""
-    with open_verified(store, dataset_id, key, sha256) as f:
+    with open_signals(store, dataset_id, key, sha256, expect=expect) as file:
         try:
-            file = SignalsFile.open(f)
-            stored = [name for name, _ in file.channels]
-            if expect is not None and stored != list(expect):
-                raise ArtifactCorruptError(
-                    f"dataset {dataset_id}: its samples {key} hold channels {stored}, "
-                    f"not the dataset's {list(expect)}",
-                    field="dataset_id",
-                )
             return file.read(names)
         except (ValueError, OSError, pa.ArrowException) as exc:
-            # right hash, wrong content: written by a bad writer
-            raise ArtifactCorruptError(
-                f"dataset {dataset_id}: its samples {key} cannot be decoded: {exc}",
-                field="dataset_id",
-            ) from exc
+            raise _undecodable(dataset_id, key, exc) from exc
 
 
 @dataclass(frozen=True, slots=True)

@@ -20,7 +20,7 @@ import numpy as np
 import pyarrow as pa
 
 from app.domain import Channel, StoredSamples
-from app.store.datasets import open_verified
+from app.store.datasets import open_signals
 from app.store.errors import ArtifactCorruptError
 from app.store.objects import ArtifactStore
 from app.store.parquet_signals import SignalsFile
@@ -135,21 +135,8 @@ def open_rows(
     names: Collection[str],
 ) -> Iterator[StoredRows]:
     """The dense dataset's object as :class:`StoredRows` of the channels ``names`` (those it
-    has), its hash checked first and its channels those of the dataset's row."""
-    dataset_id, key = stored.dataset_id, stored.key
-    with open_verified(store, dataset_id, key, stored.sha256) as f:
-        try:
-            file = SignalsFile.open(f)
-        except (ValueError, OSError, pa.ArrowException) as exc:
-            raise ArtifactCorruptError(
-                f"dataset {dataset_id}: its samples {key} cannot be decoded: {exc}",
-                field="dataset_id",
-            ) from exc
-        expect = [c.name for c in channels]
-        if [name for name, _ in file.channels] != expect:
-            raise ArtifactCorruptError(
-                f"dataset {dataset_id}: its samples {key} hold channels "
-                f"{[name for name, _ in file.channels]}, not the dataset's {expect}",
-                field="dataset_id",
-            )
+    has), its hash checked first and its channels those of the dataset's row
+    (:func:`open_signals`)."""
+    expect = [c.name for c in channels]
+    with open_signals(store, stored.dataset_id, stored.key, stored.sha256, expect=expect) as file:
         yield StoredRows(file, list(names), {c.name: c.unit for c in channels})
