@@ -59,6 +59,7 @@ def test_the_run_view_plot_keeps_a_single_sample_spike(page: Page, api) -> None:
     assert all(n < N for n in lengths), lengths  # thinned, not every sample
     measured = [t for t in traces if max((v for v in t["y"] if v is not None), default=0) > 10]
     assert measured, [(t["name"], max(v for v in t["y"] if v is not None)) for t in traces]
+
     def spike_in(y: list) -> float | None:
         return next((v for v in SPIKE_VALUES if v in y), None)
 
