@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel
 
+from estimation import kernels
 from estimation.errors import ConfigError
 from estimation.filters.estimator import REGRESSOR_BLOCK, WINDOW_STEPS, Prepared, TableFilter
 from estimation.filters.functions import run_chunk
@@ -45,7 +46,6 @@ from estimation.innovation import (
     run_innovations,
     stats_of,
 )
-from estimation.kernels.sensor import sensor_kernel
 from estimation.metrics import output_metrics
 from estimation.signals import Signals
 from estimation.table import Table
@@ -196,7 +196,9 @@ def _predict(
     if not settings.has_sensor:
         return x
     out = np.empty(x.size)
-    sensor_kernel(np.ascontiguousarray(x), 0, float(settings.lag), float(y[m - 1]), out)
+    kernels.sensor.sensor_kernel(
+        np.ascontiguousarray(x), 0, float(settings.lag), float(y[m - 1]), out
+    )
     return out
 
 
@@ -280,7 +282,7 @@ def holdout_error_windows(
             x = _evaluate(frozen, inputs, 0, z - a)
             if settings.has_sensor:
                 out = np.empty(x.size)
-                sensor_kernel(x, 0, float(settings.lag), last[name], out)
+                kernels.sensor.sensor_kernel(x, 0, float(settings.lag), last[name], out)
                 last[name], x = float(out[-1]), out
             sums_of.add(y - x)
     return HoldoutResult(

@@ -23,9 +23,8 @@ from typing import Any
 
 import numpy as np
 
+from estimation import kernels
 from estimation.errors import ShapeError
-from estimation.kernels.regressor import regressor_kernel
-from estimation.kernels.specialise import corner_token
 
 
 @dataclass(frozen=True, slots=True)
@@ -145,8 +144,10 @@ class Grid:
         n = U.shape[0]
         idx = np.empty((n, self.n_corners), dtype=np.int64)
         w = np.empty((n, self.n_corners), dtype=np.float64)
-        corners = corner_token(self.n_corners, specialised=specialised)
-        regressor_kernel(U, self._breakpoints, self._sizes, self._strides, idx, w, corners)
+        corners = kernels.specialise.corner_token(self.n_corners, specialised=specialised)
+        kernels.regressor.regressor_kernel(
+            U, self._breakpoints, self._sizes, self._strides, idx, w, corners
+        )
         return idx, w
 
     def _checked_inputs(self, U: np.ndarray | Sequence[Sequence[float]]) -> np.ndarray:

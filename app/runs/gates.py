@@ -218,3 +218,13 @@ def rejected_per_cell(
     """
     masks = result.first_gate() if attributed else result.masks
     return {label: cell_counts(idx, w, mask, n_cells) for label, mask in masks.items()}
+
+
+def gate_channels(config: dict[str, Any]) -> list[str]:
+    """The channels a run's gates name, read leniently: a malformed gate list fails later,
+    in :func:`run_options` and :func:`parse_gates`, with the message planning gives."""
+    gates = config.get("gates")
+    if not isinstance(gates, list):
+        return []
+    named = (g.get("channel") for g in gates if isinstance(g, dict))
+    return [name for name in named if isinstance(name, str)]

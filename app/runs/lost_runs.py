@@ -16,9 +16,9 @@ from app.config import Settings
 from app.db.engine import Database
 from app.db.repositories import RunRepo
 from app.domain import RunStatus
+from app.runs.context import WorkerContext
 from app.runs.frames import StatusFrame
 from app.runs.hub import LiveHub
-from app.runs.worker import WorkerContext
 
 log = logging.getLogger("mapwise.runs")
 

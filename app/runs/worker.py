@@ -20,7 +20,6 @@ import contextlib
 import math
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -30,12 +29,13 @@ from app.domain import RunStatus
 from app.errors import SupersededError
 from app.io.payload import unpack_truth
 from app.runs.attempt import Attempt, database
-from app.runs.gates import apply_gates, parse_gates
+from app.runs.context import WorkerContext
+from app.runs.gates import apply_gates, gate_channels, parse_gates
 from app.runs.limits import out_of_memory_message
 from app.runs.live import LiveTicks, Publish
 from app.runs.options import run_options, run_raster, streams_input
 from app.runs.results import RunResults, channels_read
-from app.store import default_store_url, load_on_raster, open_store
+from app.store import load_on_raster, open_store
 from app.store.log_rows import open_rows
 from estimation.estimator import Snapshot
 from estimation.filters.estimator import TableFilter
@@ -44,34 +44,6 @@ from estimation.registry import get_spec, load_state
 __all__ = ["RunSession", "WorkerContext", "database", "execute_run"]
 
 PROGRESS_EVERY_S = 1.0
-
-
-@dataclass(frozen=True, slots=True)
-class WorkerContext:
-    """What a worker needs besides the run id; picklable except for ``publish``."""
-
-    database_url: str
-    store_url: str = field(default_factory=default_store_url)  # the datasets' samples
-    live_fps: float = 20.0
-    series_points: int = 4000
-    cancel_poll_s: float = 0.2
-    version_fraction: float = 0.1
-    parent_pid: int | None = None  # exit when this process is gone (orphaned by kill -9)
-    owner: str = "local"  # the executor whose attempt this is (runs.owner)
-    heartbeat_s: float = 2.0  # an executing attempt proves it lives this often
-    take_over: bool = False  # claim a run left running by a dead attempt (a Dask retry)
-    run_max_s: float | None = None  # wall-clock budget of an attempt (MAPWISE_RUN_MAX_S)
-    run_memory_mb: float | None = None  # the memory limit a run executes under (its message)
-
-
-def gate_channels(config: dict[str, Any]) -> list[str]:
-    """The channels a run's gates name, read leniently: a malformed gate list fails later,
-    in :func:`run_options` and :func:`parse_gates`, with the message planning gives."""
-    gates = config.get("gates")
-    if not isinstance(gates, list):
-        return []
-    named = (g.get("channel") for g in gates if isinstance(g, dict))
-    return [name for name in named if isinstance(name, str)]
 
 
 class StopRun(Exception):  # noqa: N818 - control flow, not an error

@@ -4,11 +4,13 @@ with the SKF paper's case-study settings (SKF (34); the same run as ``scripts/st
 
 from __future__ import annotations
 
+import multiprocessing
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from app.config import Settings
 from app.db.engine import Database
-from app.runs.worker import WorkerContext, execute_run
+from app.runs.context import WorkerContext
 from app.services.datasets import DatasetService
 from app.services.run_plan import RunRequest
 from app.services.runs import RunService
@@ -26,14 +28,24 @@ DEMO_CONFIG = {
 DEMO_RUN_NAME = "Demo: SKF learns the NOx map (SKF (34) settings)"
 
 
+def _execute(run_id: int, context: WorkerContext) -> None:
+    from app.runs.worker import execute_run
+
+    execute_run(run_id, context)
+
+
 class _RunNow:
-    """Executes a submitted run at once, in this process."""
+    """Executes a submitted run at once, in a child process: the numerics (numba and its
+    LLVM, about 120 MiB) stay out of the server that seeds the demo
+    (docs/reliability.md#api-memory)."""
 
     def __init__(self, context: WorkerContext) -> None:
         self.context = context
 
     def submit(self, run_id: int) -> None:
-        execute_run(run_id, self.context)
+        spawn = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(max_workers=1, mp_context=spawn) as child:
+            child.submit(_execute, run_id, self.context).result()
 
     def deliver_local(self, message: dict) -> None:
         pass

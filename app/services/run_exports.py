@@ -258,8 +258,8 @@ def _read_by_run(run: Run, truth: bytes | None) -> list[str]:
     gates'), ``[]`` when its estimator no longer builds from its config (then every channel
     is read)."""
     from app.io.payload import unpack_truth
+    from app.runs.gates import gate_channels
     from app.runs.results import channels_read
-    from app.runs.worker import gate_channels
     from estimation.errors import EstimationError
     from estimation.registry import get_spec
 

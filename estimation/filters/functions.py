@@ -21,13 +21,10 @@ from collections.abc import Callable
 
 import numpy as np
 
+from estimation import kernels
 from estimation.errors import ShapeError, StateError
 from estimation.filters.settings import FilterSettings
 from estimation.filters.state import FilterState, KfState, LocalState, ThetaState
-from estimation.kernels.gain_only import nlms_kernel, sskf_kernel
-from estimation.kernels.kalman import REJECTED_GATE, REJECTED_MASK, kf_kernel
-from estimation.kernels.local import local_kernel
-from estimation.kernels.specialise import corner_token, sensor_token
 
 RunResult = tuple[FilterState, np.ndarray, np.ndarray]
 
@@ -86,7 +83,7 @@ def kf_run(
     x = np.append(state.theta, state.y_m) if state.y_m is not None else state.theta.copy()
     P = state.P.copy()
     yhat, status = _outputs(y)
-    kf_kernel(
+    kernels.kalman.kf_kernel(
         x,
         P,
         idx,
@@ -105,7 +102,7 @@ def kf_run(
         yhat,
         status,
         _variances(y, s_out),
-        corner_token(idx.shape[1], specialised=specialised),
+        kernels.specialise.corner_token(idx.shape[1], specialised=specialised),
     )
     p = state.theta.size
     y_m = float(x[p]) if state.y_m is not None else None
@@ -128,7 +125,7 @@ def _local_run(
     active, Pa = state.active.copy(), state.P_active.copy()
     ym = np.array([state.y_m if state.y_m is not None else 0.0])
     yhat, status = _outputs(y)
-    local_kernel(
+    kernels.local.local_kernel(
         theta,
         var,
         last,
@@ -153,8 +150,8 @@ def _local_run(
         yhat,
         status,
         _variances(y, s_out),
-        corner_token(idx.shape[1], specialised=specialised),
-        sensor_token(settings.has_sensor and not rls),
+        kernels.specialise.corner_token(idx.shape[1], specialised=specialised),
+        kernels.specialise.sensor_token(settings.has_sensor and not rls),
     )
     y_m = float(ym[0]) if state.y_m is not None else None
     new = _advance(
@@ -207,7 +204,7 @@ def sskf_run(
     """Steady-state KF over a chunk (SKF §4.5 (15)–(16), docs/algorithms.md §2.3)."""
     theta = state.theta.copy()
     yhat, status = _outputs(y)
-    sskf_kernel(
+    kernels.gain_only.sskf_kernel(
         theta,
         idx,
         w,
@@ -219,7 +216,7 @@ def sskf_run(
         settings.gate2,
         yhat,
         status,
-        corner_token(idx.shape[1], specialised=specialised),
+        kernels.specialise.corner_token(idx.shape[1], specialised=specialised),
     )
     if s_out is not None:
         s_out[:] = settings.sigma_v2
@@ -240,7 +237,7 @@ def nlms_run(
     """Normalised LMS over a chunk (docs/algorithms.md §2.4)."""
     theta = state.theta.copy()
     yhat, status = _outputs(y)
-    nlms_kernel(
+    kernels.gain_only.nlms_kernel(
         theta,
         idx,
         w,
@@ -253,7 +250,7 @@ def nlms_run(
         settings.gate2,
         yhat,
         status,
-        corner_token(idx.shape[1], specialised=specialised),
+        kernels.specialise.corner_token(idx.shape[1], specialised=specialised),
     )
     if s_out is not None:
         s_out[:] = settings.sigma_v2
@@ -340,7 +337,9 @@ def _advance(state: FilterState, status: np.ndarray, **arrays: object) -> Filter
     return dataclasses.replace(
         state,
         step=state.step + int(status.size),
-        rejected_mask=state.rejected_mask + int(np.count_nonzero(status == REJECTED_MASK)),
-        rejected_gate=state.rejected_gate + int(np.count_nonzero(status == REJECTED_GATE)),
+        rejected_mask=state.rejected_mask
+        + int(np.count_nonzero(status == kernels.kalman.REJECTED_MASK)),
+        rejected_gate=state.rejected_gate
+        + int(np.count_nonzero(status == kernels.kalman.REJECTED_GATE)),
         **arrays,
     )

@@ -21,8 +21,8 @@ from __future__ import annotations
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
+from estimation import kernels
 from estimation.errors import ConfigError, ShapeError
-from estimation.kernels import airpath_plant as apk
 
 __all__ = ["MODEL_DEFAULTS", "TUNABLE", "AirpathModelConfig", "model_rho"]
 
@@ -160,7 +160,7 @@ class AirpathModelConfig(BaseModel):
     def vector(self) -> np.ndarray:
         """The kernel parameter vector (order ``PARAM_NAMES``) of this model."""
         values = MODEL_DEFAULTS | {name: float(getattr(self, name)) for name in TUNABLE}
-        return np.array([values[n] for n in apk.PARAM_NAMES], dtype=np.float64)
+        return np.array([values[n] for n in kernels.airpath_plant.PARAM_NAMES], dtype=np.float64)
 
     def a1(self) -> float:
         """LPV (5) ``a1 = R_a T_im / V_im`` [J/(kg m³)]."""
@@ -199,7 +199,7 @@ def model_rho(
     rho = np.empty((n, 5))
     t_em = np.empty(n)
     w_egr = np.empty(n)
-    apk.airpath_rho_kernel(*cols, int(n_iter), model.vector(), rho, t_em, w_egr)
+    kernels.airpath_plant.airpath_rho_kernel(*cols, int(n_iter), model.vector(), rho, t_em, w_egr)
     rho1_compressor = rho[:, 0].copy()
     p_im, p_em, omega = cols[0], cols[1], cols[2]
     dp_dt = np.empty(n)

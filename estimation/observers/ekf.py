@@ -54,9 +54,9 @@ from typing import Any, ClassVar
 import numpy as np
 from pydantic import BaseModel
 
+from estimation import kernels
 from estimation.errors import ConfigError, ShapeError, StateError
 from estimation.estimator import Chunk, ChunkedEstimator
-from estimation.kernels import ekf as kern
 from estimation.observers.ekf_config import (
     OUTPUT_NAMES,
     EkfAugConfig,
@@ -82,7 +82,12 @@ __all__ = [
 ]
 
 VARIANTS = ("ekf-def", "ekf-aug", "ekf-map")
-_MODES = {"ekf-def": kern.MODE_DEF, "ekf-aug": kern.MODE_AUG, "ekf-map": kern.MODE_MAP}
+
+
+def _mode_code(kind: str) -> int:
+    """The kernel's code of an EKF variant named in :data:`VARIANTS`."""
+    k = kernels.ekf
+    return {"ekf-def": k.MODE_DEF, "ekf-aug": k.MODE_AUG, "ekf-map": k.MODE_MAP}[kind]
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -141,7 +146,7 @@ def prepare_model(
     if np.any(fuel < 0):
         k = int(np.argmax(fuel < 0))
         raise ConfigError(f"{ch.fuel!r} must be ≥ 0, got {fuel[k]:g} at sample {k}")
-    Y = np.full((n, kern.N_Y), np.nan)
+    Y = np.full((n, kernels.ekf.N_Y), np.nan)
     for o in config.outputs:
         Y[:, OUTPUT_NAMES.index(o)] = signals[ch.output(o)]
     return EkfModel(
@@ -163,20 +168,23 @@ class EkfSettings:
     r_rel2: np.ndarray
     q_rate: np.ndarray
     p0_diag: np.ndarray
-    limit: int  # kern.LIMIT_NONE / LIMIT_PSD / LIMIT_DIAG
+    limit: int  # kernels.ekf.LIMIT_NONE / LIMIT_PSD / LIMIT_DIAG
     gate2: float
     max_step_s: float
     theta0: float
     prm: np.ndarray
 
 
-_LIMITS = {"none": kern.LIMIT_NONE, "p0": kern.LIMIT_PSD, "diag": kern.LIMIT_DIAG}
+def _limit_code(limit: str) -> int:
+    """The kernel's code of a covariance limit (``config.limit``)."""
+    k = kernels.ekf
+    return {"none": k.LIMIT_NONE, "p0": k.LIMIT_PSD, "diag": k.LIMIT_DIAG}[limit]
 
 
 def resolve_settings(kind: str, config: EkfConfig) -> EkfSettings:
     """Kernel arguments of variant ``kind`` from its config (noise settings and the observer's
     own air-path model, ``config.model``)."""
-    mode = _MODES[kind]
+    mode = _mode_code(kind)
     q = list(np.square(config.sigma_state))
     p0 = list(np.square(config.sigma0_state))
     g = np.zeros(2)
@@ -200,7 +208,7 @@ def resolve_settings(kind: str, config: EkfConfig) -> EkfSettings:
         r_rel2=r_rel2,
         q_rate=np.array(q),
         p0_diag=np.array(p0),
-        limit=_LIMITS[config.limit],
+        limit=_limit_code(config.limit),
         gate2=np.inf if config.gate_sigma is None else config.gate_sigma**2,
         max_step_s=config.max_step_s,
         theta0=theta0,
@@ -213,21 +221,21 @@ def initial_state(kind: str, model: EkfModel, settings: EkfSettings, config: Ekf
     ambient manifolds and a slow turbo, as the simulator starts); ``b = 0`` / ``θ = θ0``;
     ``P0 = diag(σ0²)``; Seiliger memory ``(T_im, 0.03)`` settled alongside."""
     prm = settings.prm
-    p_amb = float(prm[kern.apk.P_AMB])
-    x_s = np.array([p_amb, 1.05 * p_amb, 0.2 * float(prm[kern.apk.OMEGA_T_MAX])])
-    mem = np.array([float(prm[kern.apk.T_IM]), 0.03])
-    kern.settle(x_s, mem, np.ascontiguousarray(model.U[0]), config.settle_s, prm)
+    p_amb = float(prm[kernels.ekf.apk.P_AMB])
+    x_s = np.array([p_amb, 1.05 * p_amb, 0.2 * float(prm[kernels.ekf.apk.OMEGA_T_MAX])])
+    mem = np.array([float(prm[kernels.ekf.apk.T_IM]), 0.03])
+    kernels.ekf.settle(x_s, mem, np.ascontiguousarray(model.U[0]), config.settle_s, prm)
     if config.x0 is not None:
         x_s = np.array(config.x0, dtype=np.float64)
     m = settings.q_rate.size
-    x = np.full(m, settings.theta0 if settings.mode == kern.MODE_MAP else 0.0)
-    x[: kern.N_X] = x_s
+    x = np.full(m, settings.theta0 if settings.mode == kernels.ekf.MODE_MAP else 0.0)
+    x[: kernels.ekf.N_X] = x_s
     return EkfState(
         kind=kind,
         step=0,
         rejected_mask=0,
         rejected_gate=0,
-        counts=np.zeros(kern.N_COUNTS, dtype=np.int64),
+        counts=np.zeros(kernels.ekf.N_COUNTS, dtype=np.int64),
         x=x,
         P=np.diag(settings.p0_diag),
         mem=mem,
@@ -251,12 +259,12 @@ def ekf_run(
         raise StateError(f"cannot run from sample {start} to {stop} of {n_log}")
     out = state.copy()
     n = stop - start
-    x_out = np.empty((n, kern.N_X))
+    x_out = np.empty((n, kernels.ekf.N_X))
     w_c = np.empty(n)
-    yhat = np.empty((n, kern.N_Y))
+    yhat = np.empty((n, kernels.ekf.N_Y))
     corr = np.empty(n)
     status = np.empty(n, dtype=np.int8)
-    kern.ekf_kernel(
+    kernels.ekf.ekf_kernel(
         out.x,
         out.P,
         out.mem,
@@ -287,20 +295,22 @@ def ekf_run(
     new = dataclasses.replace(
         out,
         step=stop,
-        rejected_mask=state.rejected_mask + int(np.count_nonzero(status == kern.REJECTED_MASK)),
-        rejected_gate=state.rejected_gate + int(np.count_nonzero(status == kern.REJECTED_GATE)),
+        rejected_mask=state.rejected_mask
+        + int(np.count_nonzero(status == kernels.ekf.REJECTED_MASK)),
+        rejected_gate=state.rejected_gate
+        + int(np.count_nonzero(status == kernels.ekf.REJECTED_GATE)),
     )
     outputs = {
         "w_c_kg_s": w_c,
         "p_im_pa": x_out[:, 0],
         "p_em_pa": x_out[:, 1],
         "omega_t_rad_s": x_out[:, 2],
-        "maf_prediction": yhat[:, kern.Y_MAF],
-        "residual": model.Y[start:stop, kern.Y_MAF] - yhat[:, kern.Y_MAF],
+        "maf_prediction": yhat[:, kernels.ekf.Y_MAF],
+        "residual": model.Y[start:stop, kernels.ekf.Y_MAF] - yhat[:, kernels.ekf.Y_MAF],
     }
-    if settings.mode == kern.MODE_AUG:
+    if settings.mode == kernels.ekf.MODE_AUG:
         outputs["maf_bias_kg_s"] = corr
-    elif settings.mode == kern.MODE_MAP:
+    elif settings.mode == kernels.ekf.MODE_MAP:
         outputs["maf_q"] = corr
     return new, outputs, status
 
@@ -313,7 +323,7 @@ class EkfObserver(ChunkedEstimator[EkfState, EkfModel]):
     state_class = EkfState
 
     def __init__(self, name: str, config: EkfConfig) -> None:
-        if name not in _MODES:
+        if name not in VARIANTS:
             raise ConfigError(f"unknown EKF variant {name!r}; choose one of {list(VARIANTS)}")
         self.name = name
         self.config = config
@@ -326,7 +336,7 @@ class EkfObserver(ChunkedEstimator[EkfState, EkfModel]):
     def signal_roles(self) -> dict[str, list[str]]:
         ch = self.config.channels
         return {
-            "axis": [ch.maf] if self.settings.mode == kern.MODE_MAP else [],
+            "axis": [ch.maf] if self.settings.mode == kernels.ekf.MODE_MAP else [],
             "output": [ch.output(o) for o in self.config.outputs],
             "input": ch.inputs(),
         }
@@ -353,16 +363,16 @@ class EkfObserver(ChunkedEstimator[EkfState, EkfModel]):
 
     def map_table(self, state: EkfState) -> Table | None:
         """The correction map ``q`` over ``W`` [kg/s] (Map only)."""
-        if self.settings.mode != kern.MODE_MAP:
+        if self.settings.mode != kernels.ekf.MODE_MAP:
             return None
         axis = Axis(self.config.channels.maf, "kg/s", self.settings.g)
-        return Table([axis], state.x[kern.N_X :].copy())
+        return Table([axis], state.x[kernels.ekf.N_X :].copy())
 
     def check_fit(self, state: EkfState) -> None:
         m = self.settings.q_rate.size
         if state.x.shape != (m,) or state.P.shape != (m, m):
             raise StateError(f"state has x {state.x.shape}, P {state.P.shape}; expected m = {m}")
-        if state.mem.shape != (2,) or state.counts.shape != (kern.N_COUNTS,):
+        if state.mem.shape != (2,) or state.counts.shape != (kernels.ekf.N_COUNTS,):
             raise StateError(f"state has mem {state.mem.shape}, counts {state.counts.shape}")
 
     def times(self, prepared: EkfModel) -> np.ndarray:
@@ -373,12 +383,12 @@ class EkfObserver(ChunkedEstimator[EkfState, EkfModel]):
         diagnostics: dict[str, float] = {}
         for o in self.config.outputs:
             j = OUTPUT_NAMES.index(o)
-            diagnostics[f"gated_{o}"] = float(state.counts[kern.C_GATE + j])
-            diagnostics[f"damped_{o}"] = float(state.counts[kern.C_DAMPED + j])
-        diagnostics["state_clamps"] = float(state.counts[kern.C_CLAMP])
+            diagnostics[f"gated_{o}"] = float(state.counts[kernels.ekf.C_GATE + j])
+            diagnostics[f"damped_{o}"] = float(state.counts[kernels.ekf.C_DAMPED + j])
+        diagnostics["state_clamps"] = float(state.counts[kernels.ekf.C_CLAMP])
         return {
             "table": table,
-            "variance": None if table is None else np.diag(state.P)[kern.N_X :].copy(),
+            "variance": None if table is None else np.diag(state.P)[kernels.ekf.N_X :].copy(),
             "outputs": chunk.outputs,
             "rejected": {"mask": state.rejected_mask, "innovation": state.rejected_gate},
             "metrics": diagnostics,

@@ -48,10 +48,10 @@ from typing import Any, ClassVar, Literal, Self
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from estimation import kernels
 from estimation.errors import ConfigError, ShapeError
 from estimation.estimator import Chunk, ChunkedEstimator
 from estimation.filters.config import AxisConfig
-from estimation.kernels.lpv import CONSTANT, NORMALISED, lpv_observer_kernel
 from estimation.observers.airpath_model import AirpathModelConfig, model_rho
 from estimation.observers.lmi import (
     DEFAULT_OUTPUT_SCALE,
@@ -67,7 +67,7 @@ from estimation.table import Axis, Grid, Table
 FUEL_AXIS_MG = [float(v) for v in np.arange(0.0, 56.0 + 1e-9, 4.0)]
 SPEED_AXIS_RPM = [float(v) for v in np.arange(0.0, 3000.0 + 1e-9, 250.0)]
 RHO_CHANNELS = ("rho1", "rho2", "rho3", "rho4", "rho5")
-_MODES = {"constant": CONSTANT, "normalised": NORMALISED}
+_MODES = ("constant", "normalised")  # the kernel's adaptation modes, by name
 OUTPUT_UNITS = {
     "p_im_pa": "Pa",
     "p_em_pa": "Pa",
@@ -76,6 +76,12 @@ OUTPUT_UNITS = {
     "maf_error_kg_s": "kg/s",
     "residual": "kg/s",  # of the MAF reading
 }
+
+
+def _mode_code(adaptation: str) -> int:
+    """The kernel's code of an adaptation mode named in :data:`_MODES`."""
+    codes = {"constant": kernels.lpv.CONSTANT, "normalised": kernels.lpv.NORMALISED}
+    return codes[adaptation]
 
 
 def _default_axes() -> list[AxisConfig]:
@@ -459,11 +465,11 @@ def lpv_run(
     wc = np.empty(m)
     dwc = np.empty(m)
     sl = slice(start, stop)
-    lpv_observer_kernel(
+    kernels.lpv.lpv_observer_kernel(
         out.x_hat, out.theta, out.weight_sum, out.excitation,
         prepared.idx[sl], prepared.w[sl], prepared.y[sl], prepared.rho[sl], prepared.e[sl],
         prepared.h[sl], prepared.accept[sl], out.L_scaled, out.state_scale, out.output_scale,
-        out.rho_lo, out.rho_hi, out.a1, out.a2, float(gamma), _MODES[adaptation],
+        out.rho_lo, out.rho_hi, out.a1, out.a2, float(gamma), _mode_code(adaptation),
         x_out, wc, dwc,
     )  # fmt: skip
     return dataclasses.replace(out, step=stop), x_out, wc, dwc

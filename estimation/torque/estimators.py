@@ -22,9 +22,9 @@ from typing import ClassVar
 
 import numpy as np
 
+from estimation import kernels
 from estimation.errors import ConfigError, ShapeError, StateError
 from estimation.estimator import ChunkedEstimator
-from estimation.kernels import torque as kt
 from estimation.registry import Cost, EstimatorKind, EstimatorSpec, family
 from estimation.signals import Signals
 from estimation.state import EstimatorState
@@ -133,19 +133,19 @@ def run_chunk(
     out = {"torque_nm": torque}
     kind = state.kind
     if kind == "uio":
-        kt.uio_kernel(new.x, speed, load, J, k, ts, torque)
+        kernels.torque.uio_kernel(new.x, speed, load, J, k, ts, torque)
     elif kind == "dirty":
-        kt.dirty_kernel(new.x, speed, load, J, k, ts, torque)
+        kernels.torque.dirty_kernel(new.x, speed, load, J, k, ts, torque)
     elif kind == "smo":
         assert isinstance(config, SmoConfig)
-        kt.smo_kernel(new.x, speed, load, J, k, float(config.lambda1), ts, torque)
+        kernels.torque.smo_kernel(new.x, speed, load, J, k, float(config.lambda1), ts, torque)
     elif kind in ADAPTIVE:
         assert isinstance(config, AdaptiveConfig)
         air = np.ascontiguousarray(inputs["air_kg_s"], dtype=np.float64)
         if air.shape != (n,):
             raise ShapeError(f"air flow has shape {air.shape}, speed ({n},)")
         out |= {"theta1": np.empty(n), "theta2": np.empty(n), "pe_lambda_min": np.empty(n)}
-        kt.adaptive_kernel(
+        kernels.torque.adaptive_kernel(
             new.x,
             new.P,
             new.Q,
