@@ -116,9 +116,11 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     import uvicorn
     from sqlalchemy.exc import SQLAlchemyError
 
+    from app.allocators import use_lean_allocators
     from app.api import create_app
     from app.db.migrate import check_schema, upgrade
 
+    use_lean_allocators()
     settings = _settings(
         args,
         host=args.host,

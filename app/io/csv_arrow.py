@@ -35,6 +35,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.csv as pacsv
 
+from app.io.arrow_arrays import float64_values, valid_rows
 from app.io.csv_body import parse_body
 from app.io.csv_sniff import content_lines
 
@@ -210,14 +211,12 @@ def _floats(chunk: pa.Array, *, sparse: bool) -> tuple[np.ndarray, np.ndarray] |
     """A float64 chunk as numpy (a view of pyarrow's buffer; NaN where a cell was empty)
     and the rows of its written-out nan/inf, which are NaN too (masked samples) in a
     ``sparse`` column and make the chunk ``None`` (refused) in any other. Read from the
-    buffers directly: ``Array.to_numpy`` would import pandas (45 MB) into the process."""
-    validity, data = chunk.buffers()
-    values = np.frombuffer(data, dtype=np.float64, count=len(chunk), offset=chunk.offset * 8)
+    buffers (:mod:`app.io.arrow_arrays`): ``Array.to_numpy`` would import pandas."""
+    values = float64_values(chunk)
     # min and max propagate nan and reach ±inf: no mask allocated on the common path
     finite = not values.size or bool(np.isfinite(values.min()) and np.isfinite(values.max()))
     if chunk.null_count:
-        bits = np.unpackbits(np.frombuffer(validity, dtype=np.uint8), bitorder="little")
-        valid = bits[chunk.offset : chunk.offset + len(chunk)].astype(bool)
+        valid = valid_rows(chunk)
         written = _NO_ROWS if finite else np.flatnonzero(~np.isfinite(values) & valid)
         if written.size and not sparse:
             return None

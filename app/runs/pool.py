@@ -30,10 +30,8 @@ from typing import Any, NoReturn
 
 import numpy as np
 
+from app.runs.context import WorkerContext
 from app.runs.limits import MIB, data_bytes, memory_limit, out_of_memory_message
-from app.runs.worker import WorkerContext, execute_run
-from estimation.registry import EstimatorKind, get_spec, names
-from estimation.signals import Signals
 
 log = logging.getLogger("mapwise.runs")
 IDLE_CHECK_S = 1.0  # how often an idle worker's thread checks that its process lives
@@ -77,6 +75,9 @@ def _watch_parent(parent_pid: int) -> None:
 def warm_up() -> int:
     """Loads the compiled kernels of the map filters (numba's cache) so the first run does
     not wait for them."""
+    from estimation.registry import EstimatorKind, get_spec, names
+    from estimation.signals import Signals
+
     u = np.array([0.0, 0.5, 1.0, 0.25])
     signals = Signals(np.arange(4.0), {"u": u, "y": u})
     config = {"axes": [{"name": "u", "breakpoints": [0.0, 1.0]}], "output": "y"}
@@ -94,10 +95,12 @@ def _touch_arrow_memory_pool() -> None:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
+    from app.io.arrow_arrays import float64_array
+
     sink = io.BytesIO()
-    pq.write_table(pa.table({"u": np.arange(8.0)}), sink)
+    pq.write_table(pa.Table.from_arrays([float64_array(np.arange(8.0))], names=["u"]), sink)
     sink.seek(0)
-    pq.read_table(sink)
+    pq.ParquetFile(sink).read_row_group(0)  # as a run reads (pq.read_table imports pandas)
 
 
 def worker_main(context: WorkerContext, queue: Any, conn: Connection) -> None:
@@ -106,6 +109,9 @@ def worker_main(context: WorkerContext, queue: Any, conn: Connection) -> None:
     ``("error", message, retire)``; ``None`` ends it. ``retire``: the worker exits after
     this run, because it kept more memory than a fresh one would (so runs keep their
     budget and the host does not pay for fragmentation)."""
+    # The numerics are imported here, in the worker, never in the server that spawns it.
+    from app.runs.worker import execute_run
+
     _set_parent_death_signal()
     _set_name("mw-idle")
     if context.parent_pid is not None:

@@ -20,6 +20,7 @@ import numpy as np
 import pyarrow as pa
 
 from app.domain import Channel, StoredSamples
+from app.io.arrow_arrays import float64_values
 from app.store.datasets import open_signals
 from app.store.errors import ArtifactCorruptError
 from app.store.objects import ArtifactStore
@@ -123,7 +124,7 @@ class StoredRows:
 def _floats(column: pa.ChunkedArray) -> np.ndarray:
     if column.null_count:
         raise ValueError(f"a column has {column.null_count} missing values")
-    chunks = [chunk.to_numpy(zero_copy_only=False) for chunk in column.chunks]
+    chunks = [float64_values(chunk) for chunk in column.chunks]
     return chunks[0] if len(chunks) == 1 else np.concatenate(chunks)
 
 

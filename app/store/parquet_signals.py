@@ -26,6 +26,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from app.io.arrow_arrays import float64_array, float64_values, valid_rows
+
 ROW_GROUP_ROWS = 65_536
 FORMAT = "mapwise-signals/1"
 SCHEMA_KEY = b"mapwise"
@@ -103,7 +105,7 @@ class SignalsWriter:
         joined = [np.concatenate(parts) for parts in zip(*self.pending, strict=True)]
         if not joined:  # an empty file: one empty row group, as before
             joined = [np.empty(0) for _ in self.schema]
-        batch = pa.record_batch([pa.array(a[:rows]) for a in joined], schema=self.schema)
+        batch = pa.record_batch([float64_array(a[:rows]) for a in joined], schema=self.schema)
         self.writer.write_batch(batch, row_group_size=ROW_GROUP_ROWS)
         self.pending = [[a[rows:] for a in joined]] if joined[0].size > rows else []
         self.buffered -= rows
@@ -150,7 +152,7 @@ def write_recorded(
             stop = start + ROW_GROUP_ROWS
             batch = pa.record_batch(
                 [
-                    pa.array(a[start:stop], mask=m[start:stop] if m.any() else None)
+                    float64_array(a[start:stop], m[start:stop])
                     for a, m in zip(arrays, masks, strict=True)
                 ],
                 schema=schema,
@@ -229,9 +231,11 @@ class SignalsFile:
             for k, (array, column) in enumerate(zip(arrays, batch.columns, strict=True)):
                 if column.null_count and (k == 0 or not self.recorded):
                     raise ValueError(f"a column has {column.null_count} missing values")
-                array[start:stop] = column.to_numpy(zero_copy_only=False)
+                array[start:stop] = float64_values(column)
                 if k > 0 and self.recorded:
-                    present[k - 1][start:stop] = column.is_valid().to_numpy(zero_copy_only=False)
+                    valid = valid_rows(column)
+                    present[k - 1][start:stop] = valid
+                    array[start:stop][~valid] = np.nan  # as Arrow reads a null
             start = stop
         if start != self.rows:
             raise ValueError(f"the columns are {start} rows long, not {self.rows}")

@@ -1,0 +1,51 @@
+"""The API process never loads what only the runs need (docs/reliability.md#api-memory): a
+real ``mapwise serve`` that seeds its demo, answers the catalog, takes uploads (streamed and
+whole), plans and follows a run and serves its versions, series and exports has mapped none of
+numba's, llvmlite's or pandas's shared libraries (about 120 and 45 MiB of its memory
+otherwise). The runs themselves execute in the worker processes, which do load numba.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from tests.support.helpers import log_csv, start_run, upload_ok, wait_run
+from tests.support.server import Server, run_body
+
+pytestmark = pytest.mark.slow  # a real server, its demo run and its workers
+
+HEAVY = ("numba", "llvmlite", "pandas")
+
+
+def _libraries(pid: int, packages: tuple[str, ...] = HEAVY) -> set[str]:
+    """The files of ``packages`` mapped into process ``pid``."""
+    mapped = (line.split()[-1] for line in Path(f"/proc/{pid}/maps").read_text().splitlines())
+    return {path for path in mapped if any(f"/{name}/" in path for name in packages)}
+
+
+def test_the_api_process_serves_a_run_without_numba_or_pandas(tmp_path: Path) -> None:
+    server = Server(f"sqlite:///{tmp_path / 'api.db'}", demo=True, workers=1)
+    try:
+        client = server.http
+        assert client.get("/api/estimators").status_code == 200
+        assert client.get("/api/scenarios").status_code == 200
+        dataset = upload_ok(client, log_csv(4000))  # read whole
+        big = log_csv(220_000)  # over the 16 MiB from which an upload streams
+        assert len(big) > 16 << 20
+        upload_ok(client, big)
+        run = start_run(client, run_body(dataset["id"], "skf"))
+        assert wait_run(client, run["id"])["status"] == "succeeded"
+        for path in ("versions", "series", "cells"):
+            assert client.get(f"/api/runs/{run['id']}/{path}").status_code == 200, path
+        for format in ("json", "csv", "dcm", "mcap"):
+            response = client.get(f"/api/runs/{run['id']}/export", params={"format": format})
+            assert response.status_code == 200, (format, response.text[:200])
+
+        assert _libraries(server.process.pid) == set()
+        workers = [pid for pid in server.children() if _libraries(pid, ("numba",))]
+        assert workers, "no run worker loaded numba: the run did not execute in one"
+        assert all(_libraries(pid, ("pandas",)) == set() for pid in workers)
+    finally:
+        server.stop()
