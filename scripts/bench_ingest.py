@@ -8,7 +8,7 @@ The drive log of ``scripts/bench_service.py`` (time + 12 channels at 100 Hz, ``%
 * ``mapwise upload parse`` — :func:`app.io.csv_files.parse_sparse_csv` on the decoded text
   (what an upload runs, empty cells allowed);
 * ``mapwise streamed parse`` / ``upload`` — :func:`app.io.csv_stream.stream_csv`, what an
-  upload of a dense CSV of 16 MiB or more runs: 4 MiB blocks by pyarrow, the checks, into
+  upload of a dense CSV of 16 MiB or more runs: 2 MiB blocks by pyarrow, the checks, into
   nothing (parse only) or into the dataset's Parquet file (written and hashed);
 * ``pyarrow.csv alone`` — ``pyarrow.csv.read_csv(path)`` with its defaults (a Table, types
   inferred, multi-threaded);

@@ -30,13 +30,15 @@ from app.io.csv_arrow import arrow_block
 from app.io.csv_files import CsvHeader, read_header
 from app.io.csv_sniff import head_lines
 from app.io.csv_upload import BINARY, reject_unknown_delimiter
-from app.io.ingest import BINARY_BYTES
 from app.io.names import bad_character
 
 STREAM_MIN_BYTES = 16 << 20  # a smaller file is read whole: it costs little either way
-BLOCK_BYTES = 4 << 20  # text parsed at a time (as csv_arrow's blocks)
+BLOCK_BYTES = 2 << 20  # text parsed at a time: two of pyarrow's blocks (ARROW_BLOCK_BYTES)
 HEAD_BYTES = 1 << 20  # the header, units row and sniffed rows must lie within it
 _BOM = b"\xef\xbb\xbf"
+# The ASCII a text may hold (ingest's BINARY_BYTES refuses the rest): deleting these from a
+# block leaves its control characters, ten times as fast as searching it with the regex.
+_TEXT = bytes(range(0x20, 0x7F)) + b"\t\n\x0c\r"
 
 
 class RowSink(Protocol):
@@ -223,7 +225,7 @@ def _stream_body(
         rows = steps.rows
         if not block.isascii():
             raise NotDense(f"non-ASCII text after row {rows}")
-        if BINARY_BYTES.search(block):  # a control character, even in a comment line
+        if block.translate(None, _TEXT):  # a control character, even in a comment line
             raise NotDense(f"a control character after row {rows}")
         got = arrow_block(
             block, header.delimiter, header.names, header.must, header.decimal, frozenset()

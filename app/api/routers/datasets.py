@@ -12,6 +12,7 @@ from fastapi import APIRouter, File, Form, Query, Response, UploadFile
 from fastapi.responses import StreamingResponse
 from starlette.concurrency import run_in_threadpool
 
+from app.allocators import give_back_free_memory
 from app.api.deps import MAX_ID, Id, Services, ServicesDep
 from app.api.schemas import (
     ERRORS,
@@ -126,6 +127,7 @@ def upload_dataset(
         raster=raster,
         rate_hz=rate_hz,
     )
+    give_back_free_memory()
     return DatasetOut.of(dataset)
 
 

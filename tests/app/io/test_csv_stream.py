@@ -25,8 +25,9 @@ from app.db.engine import Database
 from app.db.migrate import upgrade
 from app.db.repositories import DatasetRepo
 from app.domain import Dataset
-from app.io.csv_stream import NotDense, stream_csv
+from app.io.csv_stream import NotDense, StreamedCsv, stream_csv
 from app.io.errors import InputError
+from app.io.ingest import BINARY_BYTES
 from app.services.datasets import DatasetService
 from app.store import open_store, open_verified
 from app.store.parquet_signals import SignalsFile, SignalsWriter
@@ -111,8 +112,8 @@ def _same(service: DatasetService, data: bytes, **kw: object) -> Dataset:
     return fast
 
 
-def _stream(data: bytes, **kw: object) -> None:
-    stream_csv(
+def _stream(data: bytes, **kw: object) -> StreamedCsv:
+    return stream_csv(
         io.BytesIO(data),
         lambda channels: SignalsWriter(os.devnull, channels),
         units=kw.get("units"),  # type: ignore[arg-type]
@@ -203,6 +204,27 @@ def test_a_file_that_cannot_stream_is_read_whole_with_the_same_outcome(
         except InputError as exc:
             outcomes.append((None, (exc.field, str(exc))))
     assert outcomes[0] == outcomes[1]
+
+
+CONTROL = [b for b in range(128) if BINARY_BYTES.search(bytes([b]))]
+
+
+@pytest.mark.parametrize("byte", CONTROL)
+def test_every_control_character_the_whole_read_refuses_stops_the_stream(
+    byte: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr("app.io.csv_stream.BLOCK_BYTES", 4096)
+    monkeypatch.setattr("app.io.csv_stream.HEAD_BYTES", 8192)
+    text = _text(_rows(), comment_every=1000).encode()
+    with pytest.raises(NotDense, match="control character"):
+        _stream(text.replace(b"# marker 2000", b"# marker" + bytes([byte]) + b" 2000"))
+
+
+def test_tabs_and_form_feeds_in_a_comment_still_stream(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr("app.io.csv_stream.BLOCK_BYTES", 4096)
+    monkeypatch.setattr("app.io.csv_stream.HEAD_BYTES", 8192)
+    text = _text(_rows(), comment_every=1000).encode()
+    assert _stream(text.replace(b"# marker 2000", b"# marker\t\x0c 2000")).rows == ROWS
 
 
 def test_more_channels_than_the_limit_do_not_stream() -> None:
