@@ -229,13 +229,15 @@ def live_round(
     paths = [f"/api/runs/{live['id']}", "/api/datasets"]
     pollers = [Worker(poller, server.base, paths, stop, latencies) for _ in range(args.pollers)]
     api = psutil.Process(server.process.pid)
+    loop0 = client.get("/api/health").json()["loop_cpu_s"]
     cpu0, t0 = sum(api.cpu_times()[:2]), time.monotonic()
     for th in threads + pollers:
         th.start()
     for th in threads:
         th.result()
     cpu1, t1 = sum(api.cpu_times()[:2]), time.monotonic()
-    loop_lag_ms = client.get("/api/health").json()["loop_lag_ms"]
+    health = client.get("/api/health").json()
+    loop_lag_ms, loop1 = health["loop_lag_ms"], health["loop_cpu_s"]
     stop.set()
     for th in pollers:
         th.result()
@@ -247,6 +249,7 @@ def live_round(
         "frames_per_s_total": round(sum(rates), 1),
         "mb_per_s_total": round(sum(b for _, b in counts) / args.live_seconds / 2**20, 2),
         "api_cpu_pct": round(100 * (cpu1 - cpu0) / (t1 - t0), 1),
+        "loop_busy_pct": round(100 * (loop1 - loop0) / (t1 - t0), 1),
         "loop_lag_ms": loop_lag_ms,
         **(latency_figures("live", latencies) if args.pollers else {}),
     }

@@ -52,6 +52,11 @@ class HealthOut(BaseModel):
     loop_lag_ms: float = Field(
         description="Worst lateness of the event loop over the last 30 s, in milliseconds."
     )
+    loop_cpu_s: float = Field(
+        description="CPU seconds the event loop's thread has used since the server started "
+        "(sampled every 20 ms); its growth over a wall-clock interval is the share of it "
+        "the loop was busy."
+    )
 
 
 class ChannelOut(BaseModel):

@@ -33,6 +33,7 @@ def health(services: ServicesDep) -> HealthOut:
         auth_required=services.settings.auth_required,
         workers=services.settings.run_workers,
         loop_lag_ms=services.loop_lag.max_ms(),
+        loop_cpu_s=services.loop_lag.cpu_s(),
     )
 
 

@@ -54,3 +54,31 @@ def test_reports_the_worst_lateness_of_the_window_in_milliseconds() -> None:
     assert lag.max_ms() == 0.0
     worst = asyncio.run(main())
     assert worst >= 150.0
+
+
+def _burn(cpu_s: float) -> None:
+    """Computes until this thread has used ``cpu_s`` of CPU time."""
+    start = time.thread_time()
+    while time.thread_time() - start < cpu_s:
+        pass
+
+
+def test_counts_the_cpu_time_of_the_loops_thread_only() -> None:
+    lag = LoopLag(interval_s=0.01, window_s=30.0)
+
+    async def main() -> tuple[float, float]:
+        lag.start()
+        await asyncio.sleep(0.05)
+        before = lag.cpu_s()
+        await asyncio.to_thread(_burn, 0.3)  # another thread computes: the loop waits
+        await asyncio.sleep(0.05)
+        waited = lag.cpu_s()
+        _burn(0.3)  # a handler computing on the loop
+        await asyncio.sleep(0.05)
+        computed = lag.cpu_s()
+        await lag.stop()
+        return waited - before, computed - waited
+
+    waiting, computing = asyncio.run(main())
+    assert waiting < 0.1, waiting
+    assert computing >= 0.29, computing
