@@ -25,7 +25,7 @@ from app.db.engine import Database
 from app.db.migrate import upgrade
 from app.db.repositories import DatasetRepo
 from app.domain import Dataset
-from app.io.csv_stream import NotDense, StreamedCsv, stream_csv
+from app.io.csv_stream import NotDense, StreamedCsv, _Steps, stream_csv
 from app.io.errors import InputError
 from app.io.ingest import BINARY_BYTES
 from app.services.datasets import DatasetService
@@ -320,3 +320,22 @@ def test_streaming_holds_a_block_not_the_file(tmp_path: Path) -> None:
     assert whole > size_mb  # the test can fail: a whole read holds the file and its columns
     assert full < 0.5 * whole, (full, whole)
     assert abs(full - part) < 30, (full, part)  # half the file, the same memory
+
+
+@pytest.mark.parametrize("rows", [2, 3, 1000, 1001, 200_001])
+@pytest.mark.parametrize("kind", ["logger", "jittered"])
+def test_the_streamed_median_step_is_numpys_bit_for_bit(rows: int, kind: str) -> None:
+    """The steps are counted by value block by block (few distinct values for a logger, one
+    per row when jittered, with merges in between); the median is np.median's."""
+    rng = np.random.default_rng(rows)
+    if kind == "logger":  # %.6f of k / 100 Hz, as a logger writes it
+        time = np.array([float(f"{k / 100:.6f}") for k in range(rows)])
+    else:
+        time = np.cumsum(rng.uniform(0.005, 0.015, rows))
+    steps = _Steps()
+    for block in np.array_split(time, max(1, rows // 7000)):
+        steps.add(block)
+    assert steps.rows == rows
+    assert steps.median() == float(np.median(np.diff(time)))
+    if kind == "logger":
+        assert steps.values.size < 1000  # what it holds does not grow with the rows
