@@ -22,6 +22,7 @@ own limit and a worker that kept too much is replaced (:mod:`app.runs.pool`).
 from __future__ import annotations
 
 import ctypes
+from collections.abc import Callable
 
 M_MMAP_THRESHOLD, M_ARENA_MAX = -3, -8  # glibc's <malloc.h>
 API_ARENAS = 2
@@ -35,19 +36,21 @@ def use_lean_allocators() -> None:
     import pyarrow as pa
 
     pa.set_memory_pool(pa.system_memory_pool())
-    try:
-        mallopt = ctypes.CDLL(None).mallopt
-    except (OSError, AttributeError):
-        return
-    mallopt(M_ARENA_MAX, API_ARENAS)
-    mallopt(M_MMAP_THRESHOLD, API_MMAP_THRESHOLD)
+    if (mallopt := _libc("mallopt")) is not None:
+        mallopt(M_ARENA_MAX, API_ARENAS)
+        mallopt(M_MMAP_THRESHOLD, API_MMAP_THRESHOLD)
 
 
 def give_back_free_memory() -> None:
     """Return the heap's free pages to the system (glibc's ``malloc_trim``; a no-op
     elsewhere): after an upload, what its threads freed between live objects."""
+    if (malloc_trim := _libc("malloc_trim")) is not None:
+        malloc_trim(0)
+
+
+def _libc(name: str) -> Callable[..., int] | None:
+    """The C library's function ``name``, ``None`` where it has none (not glibc)."""
     try:
-        malloc_trim = ctypes.CDLL(None).malloc_trim
+        return getattr(ctypes.CDLL(None), name)  # type: ignore[no-any-return]
     except (OSError, AttributeError):
-        return
-    malloc_trim(0)
+        return None

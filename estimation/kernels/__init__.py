@@ -12,25 +12,10 @@ API server, never loads numba and its LLVM (about 120 MiB; docs/reliability.md#a
 from __future__ import annotations
 
 import importlib
+import pkgutil
 from types import ModuleType
 
-SUBMODULES = frozenset(
-    {
-        "airpath_plant",
-        "ekf",
-        "ekf_innovation",
-        "gain_only",
-        "kalman",
-        "local",
-        "lpv",
-        "regressor",
-        "sensor",
-        "specialise",
-        "torque",
-        "torque_plant",
-        "vehicle",
-    }
-)
+SUBMODULES = frozenset(module.name for module in pkgutil.iter_modules(__path__))
 
 
 def __getattr__(name: str) -> ModuleType:

@@ -115,19 +115,21 @@ def upload_dataset(
     """Upload a log. The whole file is validated before anything is stored. The response
     also carries ingest's ``notes`` and the ``masked`` samples per channel, when there are
     any; they are stored with the dataset, so ``GET`` gives them too."""
-    dataset = services.datasets.upload(
-        file.file,
-        filename=file.filename,
-        name=name,
-        units=_units(units),
-        max_bytes=services.settings.max_upload_bytes,
-        max_whole_bytes=services.settings.max_whole_bytes,
-        max_decompressed_bytes=services.settings.max_decompressed_bytes,
-        channels=_channels(channels),
-        raster=raster,
-        rate_hz=rate_hz,
-    )
-    give_back_free_memory()
+    try:
+        dataset = services.datasets.upload(
+            file.file,
+            filename=file.filename,
+            name=name,
+            units=_units(units),
+            max_bytes=services.settings.max_upload_bytes,
+            max_whole_bytes=services.settings.max_whole_bytes,
+            max_decompressed_bytes=services.settings.max_decompressed_bytes,
+            channels=_channels(channels),
+            raster=raster,
+            rate_hz=rate_hz,
+        )
+    finally:  # a refused upload parsed as much as an accepted one may have
+        give_back_free_memory()
     return DatasetOut.of(dataset)
 
 
