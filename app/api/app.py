@@ -25,6 +25,7 @@ from fastapi.middleware.cors import CORSMiddleware
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from app.api.deps import Services, require_token
+from app.api.errors import install_error_handlers
 from app.api.routers import (
     base_maps,
     catalog,
@@ -40,12 +41,7 @@ from app.api.security import DEFAULT_CSP, TrustedHosts, docs_router
 from app.config import Settings, get_settings
 from app.db.engine import Database
 from app.db.migrate import check_schema, upgrade
-from app.errors import (
-    AppError,
-    InvalidRequestError,
-    PayloadTooLargeError,
-    install_error_handlers,
-)
+from app.errors import AppError, InvalidRequestError, PayloadTooLargeError
 from app.logs import install_redaction
 from app.runs.executor import RunExecutor, make_executor
 from app.runs.hub import LiveHub
