@@ -207,6 +207,33 @@ class Table(Grid):
 
     __call__ = evaluate
 
+    def on_grid(self, breakpoints: Sequence[Sequence[float] | np.ndarray]) -> np.ndarray:
+        """The table's multilinear interpolation on the tensor grid ``b_1 × … × b_d`` (one
+        array of targets per axis, in axis order; clamped beyond the box), of shape
+        ``(len(b_1), …, len(b_d))``: what :meth:`evaluate` gives on every node of that grid.
+
+        Multilinear interpolation is the tensor product of 1-D linear interpolants, so it is
+        applied one axis at a time. Along axis ``a``, with ``g`` its breakpoints, a target
+        ``u`` lies in interval ``i`` (``g_i ≤ u ≤ g_{i+1}``, clamped to the first or last) at
+        ``t = (u − g_i) / (g_{i+1} − g_i)`` clipped to ``[0, 1]``, and
+        ``v ← (1 − t) v[…, i, …] + t v[…, i + 1, …]``. On the table's own breakpoints ``t``
+        is 0 or 1, so its nodes come back exactly. Pure numpy over the grid: no kernel is
+        compiled, so a process that has not loaded numba can call it
+        (docs/reliability.md#api-memory)."""
+        if len(breakpoints) != self.ndim:
+            raise ShapeError(f"a grid of {self.ndim} axes needs {self.ndim} breakpoint arrays")
+        values = self.values
+        for a, (axis, targets) in enumerate(zip(self.axes, breakpoints, strict=True)):
+            g = axis.breakpoints
+            u = np.asarray(targets, dtype=np.float64)
+            i = np.clip(np.searchsorted(g, u, side="right") - 1, 0, g.size - 2)
+            t = np.clip((u - g[i]) / (g[i + 1] - g[i]), 0.0, 1.0)
+            shape = [1] * self.ndim
+            shape[a] = u.size
+            t = t.reshape(shape)
+            values = (1.0 - t) * np.take(values, i, axis=a) + t * np.take(values, i + 1, axis=a)
+        return values
+
     def to_dict(self) -> dict[str, Any]:
         return {"axes": [a.to_dict() for a in self.axes], "values": self.values.tolist()}
 

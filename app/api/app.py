@@ -92,7 +92,12 @@ def create_app(settings: Settings | None = None, *, execute_runs: bool = True) -
             db=db,
             hub=hub,
             executor=executor,
-            datasets=DatasetService(db, open_store(settings.store_url)),
+            datasets=DatasetService(
+                db,
+                open_store(settings.store_url),
+                simulate_in_child=True,
+                memory_mb=settings.run_memory_mb,
+            ),
             runs=run_service,
             exports=RunExports(db, settings),
             sweeps=SweepService(db, run_service),
@@ -126,6 +131,7 @@ def create_app(settings: Settings | None = None, *, execute_runs: bool = True) -
             await app.state.services.loop_lag.stop()
             if executor is not None:
                 await asyncio.to_thread(executor.shutdown)
+            await asyncio.to_thread(app.state.services.datasets.close)
             db.dispose()
 
     app = FastAPI(

@@ -87,6 +87,13 @@ class Database:
         )
 
     @property
+    def shared(self) -> bool:
+        """Whether another process can open this database (not SQLite in memory)."""
+        return not (
+            self.backend == "sqlite" and make_url(self.url).database in (None, "", ":memory:")
+        )
+
+    @property
     def backend(self) -> Literal["sqlite", "postgresql"]:
         return "sqlite" if self.url.startswith("sqlite") else "postgresql"
 

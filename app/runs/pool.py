@@ -42,7 +42,7 @@ RETIRE_FRACTION = 0.25  # a worker holding this much of a run budget more than w
 # -- in the worker process --------------------------------------------------------------------
 
 
-def _set_parent_death_signal() -> None:
+def set_parent_death_signal() -> None:
     """Linux: SIGKILL this worker when the server's thread that started it dies (``kill -9``
     of the server included)."""
     try:
@@ -54,7 +54,7 @@ def _set_parent_death_signal() -> None:
         pass
 
 
-def _set_name(name: str) -> None:
+def set_process_name(name: str) -> None:
     """This process's name in ``/proc/<pid>/comm`` (at most 15 bytes): what ``ps`` shows."""
     try:
         import ctypes
@@ -65,7 +65,7 @@ def _set_name(name: str) -> None:
         pass
 
 
-def _watch_parent(parent_pid: int) -> None:
+def watch_parent(parent_pid: int) -> None:
     while True:
         if os.getppid() != parent_pid:
             os._exit(70)
@@ -83,11 +83,11 @@ def warm_up() -> int:
     config = {"axes": [{"name": "u", "breakpoints": [0.0, 1.0]}], "output": "y"}
     for name in names(EstimatorKind.MAP_FILTER):
         get_spec(name).build(config).fit(signals)
-    _touch_arrow_memory_pool()
+    touch_arrow_memory_pool()
     return os.getpid()
 
 
-def _touch_arrow_memory_pool() -> None:
+def touch_arrow_memory_pool() -> None:
     """Write and read a tiny Parquet table, as a run reads its dataset. pyarrow's allocator
     reserves about 1 GB of address space (``VmData``) on first use: reserved here, before
     the worker's baseline, it neither counts against a run's ``RLIMIT_DATA`` budget nor makes
@@ -112,10 +112,10 @@ def worker_main(context: WorkerContext, queue: Any, conn: Connection) -> None:
     # The numerics are imported here, in the worker, never in the server that spawns it.
     from app.runs.worker import execute_run
 
-    _set_parent_death_signal()
-    _set_name("mw-idle")
+    set_parent_death_signal()
+    set_process_name("mw-idle")
     if context.parent_pid is not None:
-        threading.Thread(target=_watch_parent, args=(context.parent_pid,), daemon=True).start()
+        threading.Thread(target=watch_parent, args=(context.parent_pid,), daemon=True).start()
 
     def publish(message: dict[str, Any]) -> None:
         with contextlib.suppress(Exception):  # a full queue drops the frame, never blocks
@@ -132,7 +132,7 @@ def worker_main(context: WorkerContext, queue: Any, conn: Connection) -> None:
             _leave(queue)
         if run_id is None:
             _leave(queue)
-        _set_name(f"mw-run-{run_id}")
+        set_process_name(f"mw-run-{run_id}")
         reply: tuple[str, str]
         try:
             with memory_limit(budget):
@@ -142,7 +142,7 @@ def worker_main(context: WorkerContext, queue: Any, conn: Connection) -> None:
             reply = ("error", out_of_memory_message(budget))
         except Exception as exc:  # the run could not even record its failure
             reply = ("error", " ".join(f"{type(exc).__name__}: {exc}".split()))
-        _set_name("mw-idle")
+        set_process_name("mw-idle")
         retire = budget is not None and data_bytes() - baseline > RETIRE_FRACTION * budget * MIB
         conn.send((*reply, retire))
         if retire:
@@ -178,7 +178,7 @@ class Outcome:
 OnOutcome = Callable[[int, Outcome], None]
 
 
-def _how(exitcode: int | None) -> str:
+def how_it_ended(exitcode: int | None) -> str:
     if exitcode is None:
         return "stopped answering"
     if exitcode < 0:
@@ -226,7 +226,7 @@ class _Slot:
         if self.process.exitcode is None:
             self.process.kill()
             self.process.join(timeout=STOP_WAIT_S)
-        how = _how(self.process.exitcode)
+        how = how_it_ended(self.process.exitcode)
         if self.process.exitcode is not None and self.process.exitcode > 0:
             self.start_failures += 1  # it exited by itself: an error, not a kill
         self.conn.close()

@@ -31,6 +31,7 @@ from app.io.errors import too_large
 from app.io.ingest import IngestLimits, ParsedLog, detect_format, ingest
 from app.io.names import check_name, without_refused
 from app.io.payload import pack_truth
+from app.services.simulation import SimulationRequest, Simulator
 from app.store import (
     ArtifactStore,
     StagedDataset,
@@ -100,9 +101,24 @@ def _opened(source: BinaryIO | bytes | os.PathLike[str]) -> Iterator[BinaryIO]:
 
 
 class DatasetService:
-    def __init__(self, db: Database, store: ArtifactStore | None = None) -> None:
+    def __init__(
+        self,
+        db: Database,
+        store: ArtifactStore | None = None,
+        *,
+        simulate_in_child: bool = False,
+        memory_mb: float | None = None,
+    ) -> None:
         self.db = db
         self.store = store or open_store()
+        self.simulator: Simulator | None = None
+        if simulate_in_child and db.shared and self.store.shared:
+            self.simulator = Simulator(db.url, self.store.url, memory_mb)
+
+    def close(self) -> None:
+        """End the simulating child, if one was started."""
+        if self.simulator is not None:
+            self.simulator.close()
 
     def _store(
         self, signals: Signals | ParsedLog, add: Callable[[DatasetRepo], Dataset]
@@ -292,13 +308,26 @@ class DatasetService:
         progress: Progress | None = None,
     ) -> Dataset:
         """Simulate ``scenario`` and store it with its truth. ``progress``, when given, is
-        what the build reports its integrator's steps into (:mod:`estimation.progress`)."""
+        what the build reports its integrator's steps into (:mod:`estimation.progress`).
+
+        With ``simulate_in_child`` (the server's setting) a child process simulates and
+        stores it under the ``memory_mb`` budget (:mod:`app.services.simulation`), unless the
+        database or the store lives in this process's memory, where no child could reach it.
+        """
         self.check_simulation(scenario, duration_s, name)
-        given = _dataset_name(name, None, f"{scenario} (seed {seed})")
+        request = SimulationRequest(scenario, seed, name, duration_s, mismatch)
+        if self.simulator is None:
+            return self.simulate_here(request, progress)
+        return self.get(self.simulator.simulate(request, progress))
+
+    def simulate_here(self, request: SimulationRequest, progress: Progress | None) -> Dataset:
+        """:meth:`simulate` in this process."""
+        scenario = request.scenario
+        given = _dataset_name(request.name, None, f"{scenario} (seed {request.seed})")
         try:
             with reporting(progress or Progress()):
                 data = get_scenario(scenario).build(
-                    seed=seed, duration_s=duration_s, mismatch=mismatch
+                    seed=request.seed, duration_s=request.duration_s, mismatch=request.mismatch
                 )
         except EstimationError as exc:  # out of range, or too short for two samples
             raise InvalidRequestError(str(exc), field="duration_s") from exc
@@ -316,7 +345,7 @@ class DatasetService:
                 time_column="time",
                 channels=[Channel(n, signals.units[n]) for n in signals.names],
                 scenario=scenario,
-                seed=seed,
+                seed=request.seed,
                 truth=truth,
             ),
         )

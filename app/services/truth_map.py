@@ -9,8 +9,9 @@ version, else the run's table) may order those inputs differently or use other b
 * on the truth's own breakpoints the values are the truth's nodes exactly (``exact``), which
   is what the run metrics score (:func:`estimation.metrics.map_metrics`);
 * on other breakpoints they are the truth table's multilinear interpolation, clamped beyond
-  its box (:meth:`estimation.table.Table.evaluate`); an off-grid truth (a smooth function,
-  docs/fidelity.md) is then approximated between the truth's nodes (``exact`` false).
+  its box (:meth:`estimation.table.Table.on_grid`: numpy only, so the API process loads no
+  numba); an off-grid truth (a smooth function, docs/fidelity.md) is then approximated
+  between the truth's nodes (``exact`` false).
 """
 
 from __future__ import annotations
@@ -91,14 +92,13 @@ def truth_on_grid(db: Database, run_id: int) -> TruthOnGrid:
         np.array_equal(true_map.axes[k].breakpoints, a.breakpoints)
         for k, a in zip(order, grid, strict=True)
     )
-    mesh = np.meshgrid(*[a.breakpoints for a in grid], indexing="ij")
-    columns: list[np.ndarray] = [np.empty(0)] * len(grid)
+    targets: list[np.ndarray] = [np.empty(0)] * len(grid)
     for run_axis, truth_axis in enumerate(order):
-        columns[truth_axis] = mesh[run_axis].ravel()
-    values = Table(list(true_map.axes), true_map.values).evaluate(np.column_stack(columns))
+        targets[truth_axis] = grid[run_axis].breakpoints
+    on_truth_axes = Table(list(true_map.axes), true_map.values).on_grid(targets)
     return TruthOnGrid(
         axes=[a.to_dict() for a in grid],
-        values=values.reshape(mesh[0].shape),
+        values=np.transpose(on_truth_axes, order),  # run axis r is the truth's axis order[r]
         name=name,
         unit=unit,
         exact=exact,

@@ -31,6 +31,8 @@ class ArtifactStore:
         self.fs, root = fsspec.core.url_to_fs(url)
         self.root = root.rstrip("/")
         self.local = isinstance(self.fs, LocalFileSystem)
+        # fsspec's memory:// lives in this process: another one sees an empty store there
+        self.shared = "memory" not in self.fs.protocol
 
     def path(self, key: str) -> str:
         return f"{self.root}/{key}"

@@ -216,3 +216,32 @@ def test_the_specialised_regressor_is_bit_identical_on_drive_and_jumping_inputs(
             ref_idx, ref_w, _ = ref.regressor([a.breakpoints for a in table.axes], U[k])
             assert_array_equal(idx[k], ref_idx)
             assert_allclose(w[k], ref_w, rtol=1e-12, atol=1e-15)
+
+
+@pytest.mark.parametrize("shape", SHAPES)
+def test_on_grid_matches_the_slow_reference_on_every_node(shape: tuple[int, ...]) -> None:
+    """The numpy resampling onto a tensor grid (beyond the box, between and on the nodes)
+    equals the slow reference at each node of the target grid."""
+    rng = np.random.default_rng(20 + sum(shape))
+    table = _random_table(rng, shape)
+    targets = []
+    for axis in table.axes:
+        g = axis.breakpoints
+        span = g[-1] - g[0]
+        inside = rng.uniform(g[0] - 0.3 * span, g[-1] + 0.3 * span, 3)
+        targets.append(np.sort(np.concatenate([inside, g[[0, -1]], g[:1] - span])))
+    got = table.on_grid(targets)
+    assert got.shape == tuple(t.size for t in targets)
+    breakpoints = [a.breakpoints for a in table.axes]
+    for node in np.ndindex(got.shape):
+        u = np.array([t[k] for t, k in zip(targets, node, strict=True)])
+        assert_allclose(
+            got[node], ref.evaluate(breakpoints, table.values, u), rtol=1e-12, atol=1e-14
+        )
+
+
+def test_on_grid_gives_the_nodes_exactly_and_refuses_a_wrong_grid() -> None:
+    table = _random_table(np.random.default_rng(3), (4, 3, 5))
+    assert_array_equal(table.on_grid([a.breakpoints for a in table.axes]), table.values)
+    with pytest.raises(ShapeError, match="3 breakpoint arrays"):
+        table.on_grid([table.axes[0].breakpoints])

@@ -204,11 +204,13 @@ class Server:
         return out
 
     def workers(self) -> list[int]:
-        """Process ids of the server's run workers (its spawned pool processes)."""
+        """Process ids of the server's run workers: its spawned processes but the simulating
+        child (``mw-simulate``, app/services/simulation.py)."""
         out = []
         for pid in self.children():
             try:
-                if b"spawn_main" in Path(f"/proc/{pid}/cmdline").read_bytes():
+                spawned = b"spawn_main" in Path(f"/proc/{pid}/cmdline").read_bytes()
+                if spawned and Path(f"/proc/{pid}/comm").read_text().strip() != "mw-simulate":
                     out.append(pid)
             except OSError:  # gone meanwhile
                 pass

@@ -1,8 +1,9 @@
 """The API process never loads what only the runs need (docs/reliability.md#api-memory): a
 real ``mapwise serve`` that seeds its demo, answers the catalog, takes uploads (streamed and
-whole), plans and follows a run and serves its versions, series and exports has mapped none of
-numba's, llvmlite's or pandas's shared libraries (about 120 and 45 MiB of its memory
-otherwise). The runs themselves execute in the worker processes, which do load numba.
+whole), simulates scenarios (streamed and plain), plans and follows runs and serves their
+versions, series, exports and true map has mapped none of numba's, llvmlite's or pandas's
+shared libraries (about 120 and 45 MiB of its memory otherwise). The runs execute in the
+worker processes and the simulations in the simulating child, which do load numba.
 """
 
 from __future__ import annotations
@@ -43,9 +44,23 @@ def test_the_api_process_serves_a_run_without_numba_or_pandas(tmp_path: Path) ->
             response = client.get(f"/api/runs/{run['id']}/export", params={"format": format})
             assert response.status_code == 200, (format, response.text[:200])
 
+        simulated = client.post(
+            "/api/datasets/simulate", json={"scenario": "skf-sim2", "duration_s": 20.0}
+        )
+        assert simulated.status_code == 201, simulated.text
+        with client.stream(
+            "POST", "/api/datasets/simulate/stream", json={"scenario": "maf-1d-whtc", "seed": 2}
+        ) as streamed:
+            assert '"dataset"' in "".join(streamed.iter_text()).splitlines()[-1]
+        truth_run = start_run(client, run_body(simulated.json()["id"]))  # the true map's grid
+        assert wait_run(client, truth_run["id"])["status"] == "succeeded"
+        truth = client.get(f"/api/runs/{truth_run['id']}/truth-map")
+        assert truth.status_code == 200, truth.text
+        assert truth.json()["values"] is not None
+
         assert _libraries(server.process.pid) == set()
         workers = [pid for pid in server.children() if _libraries(pid, ("numba",))]
-        assert workers, "no run worker loaded numba: the run did not execute in one"
+        assert len(workers) == 2, "the run worker and the simulating child load numba"
         assert all(_libraries(pid, ("pandas",)) == set() for pid in workers)
     finally:
         server.stop()

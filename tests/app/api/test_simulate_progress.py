@@ -10,8 +10,6 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from estimation.plants import airpath
-
 
 def _lines(client: TestClient, body: dict) -> tuple[int, str, list[dict]]:
     with client.stream("POST", "/api/datasets/simulate/stream", json=body) as response:
@@ -26,9 +24,8 @@ def _parse(text: str) -> list[dict]:
 
 @pytest.mark.slow  # a full simulation streamed: 9 s
 def test_progress_rises_then_the_dataset_arrives(client: TestClient) -> None:
-    # The plant run is cached per process by its inputs (not the seed); an earlier test in
-    # this worker may have simulated the same cycle, and a cached run has nothing to count.
-    airpath._PLANT_RUNS.clear()
+    # The plant run is cached by its inputs (not the seed) in the server's simulating child,
+    # which this module's app starts at its first simulation: this one, so nothing is cached.
     body = {"scenario": "maf-whtc", "seed": 4, "name": "streamed WHTC"}
     status, content_type, lines = _lines(client, body)
     assert status == 200
