@@ -189,6 +189,16 @@ def how_it_ended(exitcode: int | None) -> str:
     return f"exited with code {exitcode}"
 
 
+def collect(process: SpawnProcess) -> str:
+    """Wait up to :data:`STOP_WAIT_S` for ``process`` to end, kill it if it has not; how it
+    ended."""
+    process.join(timeout=STOP_WAIT_S)
+    if process.exitcode is None:
+        process.kill()
+        process.join(timeout=STOP_WAIT_S)
+    return how_it_ended(process.exitcode)
+
+
 class _Slot:
     """One worker process and the server thread that feeds it."""
 
@@ -222,11 +232,7 @@ class _Slot:
         """The worker is gone (or going): collect it; how it ended."""
         assert self.process is not None
         assert self.conn is not None
-        self.process.join(timeout=STOP_WAIT_S)
-        if self.process.exitcode is None:
-            self.process.kill()
-            self.process.join(timeout=STOP_WAIT_S)
-        how = how_it_ended(self.process.exitcode)
+        how = collect(self.process)
         if self.process.exitcode is not None and self.process.exitcode > 0:
             self.start_failures += 1  # it exited by itself: an error, not a kill
         self.conn.close()

@@ -38,7 +38,6 @@ from estimation.mismatch import MismatchLevel
 from estimation.progress import Progress
 
 POLL_S = 0.05  # how often the server copies the child's progress while it waits
-STOP_WAIT_S = 5.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -205,15 +204,11 @@ class Simulator:
 
     def _reap(self) -> str:
         """Collect the child; how it ended."""
-        from app.runs.pool import how_it_ended
+        from app.runs.pool import collect
 
         assert self._process is not None
         assert self._conn is not None
-        self._process.join(timeout=STOP_WAIT_S)
-        if self._process.exitcode is None:
-            self._process.kill()
-            self._process.join()
-        how = how_it_ended(self._process.exitcode)
+        how = collect(self._process)
         self._conn.close()
         self._process = self._conn = None
         return how
