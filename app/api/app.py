@@ -40,7 +40,7 @@ from app.api.routers import (
 from app.api.security import DEFAULT_CSP, TrustedHosts, docs_router
 from app.config import Settings, get_settings
 from app.db.engine import Database
-from app.db.migrate import check_schema, upgrade
+from app.db.migrate import check_schema, migrate
 from app.errors import AppError, InvalidRequestError, PayloadTooLargeError
 from app.logs import install_redaction
 from app.runs.executor import RunExecutor, make_executor
@@ -64,9 +64,8 @@ class SchemaError(RuntimeError):
 def prepare_database(settings: Settings) -> str:
     """Create the schema on an empty database; refuse an out-of-date or unknown one."""
     check = check_schema(settings.database_url)
-    if check.state == "empty":
-        upgrade(settings.database_url, store_url=settings.store_url)
-        return check.head
+    if check.state != "current":  # migrated if empty; else checked again under the lock
+        _, check = migrate(settings.database_url, store_url=settings.store_url, only_if_empty=True)
     if check.state != "current":
         raise SchemaError(check.message)
     return check.head

@@ -118,7 +118,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
 
     from app.allocators import use_lean_allocators
     from app.api import create_app
-    from app.db.migrate import check_schema, upgrade
+    from app.db.migrate import check_schema, migrate
 
     use_lean_allocators()
     settings = _settings(
@@ -132,9 +132,12 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     )
     demo_run: int | None = None
     try:
-        check = check_schema(settings.database_url)
-        if check.state == "empty":
-            upgrade(settings.database_url, store_url=settings.store_url)
+        check = before = check_schema(settings.database_url)
+        if check.state != "current":  # migrated if empty; else checked again under the lock
+            before, check = migrate(
+                settings.database_url, store_url=settings.store_url, only_if_empty=True
+            )
+        if before.state == "empty":
             if settings.seed_demo:
                 from app.services.demo import seed_demo
 
@@ -196,15 +199,13 @@ def _has_tokens(settings: Settings) -> bool:
 def _cmd_db_upgrade(args: argparse.Namespace) -> int:
     from sqlalchemy.exc import SQLAlchemyError
 
-    from app.db.migrate import check_schema, upgrade
+    from app.db.migrate import migrate
 
     settings = _settings(args)
     try:
-        before = check_schema(settings.database_url)
+        before, after = migrate(settings.database_url, store_url=settings.store_url)
         if before.state == "unknown":
             raise UsageError(before.message)
-        upgrade(settings.database_url, store_url=settings.store_url)
-        after = check_schema(settings.database_url)
     except SQLAlchemyError as exc:
         raise _db_error(exc, settings.database_url) from None
     print(f"schema {before.current or 'empty'} -> {after.current}")

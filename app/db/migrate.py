@@ -116,6 +116,23 @@ class SchemaCheck:
         return f"schema {self.state} ({self.current})"
 
 
+def migrate(
+    url: str, *, store_url: str | None = None, only_if_empty: bool = False
+) -> tuple[SchemaCheck, SchemaCheck]:
+    """The schema's state, then, unless it is ``unknown`` (or, with ``only_if_empty``, not
+    ``empty``), the upgrade to head: ``(before, after)``. Both are checked under the
+    migration lock, so a migration another process runs is seen finished, never half-way:
+    checked before taking the lock, a check whose two reads (the revision, then the tables)
+    straddled that migration's commit saw tables without a revision, ``unknown``, and a
+    second ``mapwise db upgrade`` on an empty PostgreSQL database failed."""
+    with migration_lock(url):
+        before = check_schema(url)
+        if before.state == "unknown" or (only_if_empty and before.state != "empty"):
+            return before, before
+        command.upgrade(alembic_config(url, store_url=store_url), "head")
+        return before, check_schema(url)
+
+
 def check_schema(url: str) -> SchemaCheck:
     """``empty`` (no tables at all), ``current``, ``outdated`` or ``unknown`` (not ours)."""
     head = head_revision()
