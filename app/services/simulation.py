@@ -101,9 +101,7 @@ def _child_main(
         if request is None:
             db.dispose()
             os._exit(0)  # as a run worker leaves: numba's teardown releases nothing
-        progress.counts[:] = 0
-        progress.stage = 0
-        try:
+        try:  # the server zeroed the shared progress before sending the request
             with memory_limit(memory_mb):
                 answer: tuple[Any, ...] = ("ok", service.simulate_here(request, progress).id)
         except AppError as exc:
