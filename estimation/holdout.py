@@ -34,7 +34,7 @@ import numpy as np
 from pydantic import BaseModel
 
 from estimation import kernels
-from estimation.errors import ConfigError
+from estimation.errors import ConfigError, ShapeError
 from estimation.filters.estimator import REGRESSOR_BLOCK, WINDOW_STEPS, Prepared, TableFilter
 from estimation.filters.functions import run_chunk
 from estimation.filters.settings import FilterSettings
@@ -251,17 +251,22 @@ def holdout_error_windows(
     fraction: float = DEFAULT_FIT_FRACTION,
     window: int = WINDOW_STEPS,
     timeline: Callable[[], np.ndarray] | None = None,
+    accept: np.ndarray | None = None,
 ) -> HoldoutResult:
-    """:func:`holdout_error` of a log of ``n`` samples that is never held whole (every
-    sample accepted): ``read(a, z)`` gives its rows ``a … z−1``, read ``window`` at a time,
-    once for the fit and once for the prediction; ``timeline()`` its time column, read only
-    for a delay in seconds (as :meth:`TableFilter.run_windows`). The statistics are running
-    sums, equal to :func:`holdout_error`'s up to rounding
-    (``tests/estimation/test_holdout.py``)."""
+    """:func:`holdout_error` of a log of ``n`` samples that is never held whole:
+    ``read(a, z)`` gives its rows ``a … z−1``, read ``window`` at a time, once for the fit
+    and once for the prediction; ``timeline()`` its time column, read only for a delay in
+    seconds (as :meth:`TableFilter.run_windows`); ``accept`` the ``(n,)`` mask of the samples
+    fitted and scored (default: all). The statistics are running sums, equal to
+    :func:`holdout_error`'s up to rounding (``tests/estimation/test_holdout.py``)."""
     m = split_point(n, fraction)
+    mask = np.ones(n, dtype=np.bool_) if accept is None else np.asarray(accept, dtype=np.bool_)
+    if mask.shape != (n,):
+        raise ShapeError(f"accept mask has shape {mask.shape}, the log has {n} samples")
     filt = map_filter(estimator, config)
     first_m = (lambda: timeline()[:m]) if timeline is not None else (lambda: read(0, m).time)
-    sums, state, settings = _fit_windows(filt, read, m, window, filt.settings_on(m, first_m))
+    settings = filt.settings_on(m, first_m)
+    sums, state, settings = _fit_windows(filt, read, mask[:m], window, settings)
     delay = settings.delay
     if m - delay < 1 or n - m < 1:
         raise ConfigError(
@@ -278,19 +283,20 @@ def holdout_error_windows(
         rows = read(a - tau, z)  # operating points a−τ … z−τ−1, measurements a … z−1
         inputs = [rows[ax.name][: z - a] for ax in filt.config.axes]
         y = rows[filt.config.output][tau:]
+        scored = mask[a:z]
         for name, frozen, sums_of in (("adapted", table, adapted), ("base", filt.theta0, base)):
             x = _evaluate(frozen, inputs, 0, z - a)
             if settings.has_sensor:
                 out = np.empty(x.size)
                 kernels.sensor.sensor_kernel(x, 0, float(settings.lag), last[name], out)
                 last[name], x = float(out[-1]), out
-            sums_of.add(y - x)
+            sums_of.add((y - x)[scored])
     return HoldoutResult(
         unit=unit,
         fraction=fraction,
         fit_samples=m,
         holdout_samples=n - m,
-        scored=n - m,
+        scored=int(np.count_nonzero(mask[m:])),
         adapted=adapted.metrics(),
         base=base.metrics(),
         innovations=sums.stats(),
@@ -301,12 +307,14 @@ def holdout_error_windows(
 def _fit_windows(
     filt: TableFilter,
     read: Callable[[int, int], Signals],
-    m: int,
+    accept: np.ndarray,
     window: int,
     settings: FilterSettings,
 ) -> tuple[InnovationSums, FilterState, FilterSettings]:
-    """:func:`run_innovations` over rows ``0 … m−1`` with ``settings``, a window at a time,
-    keeping the sums of the accepted innovations instead of the series."""
+    """:func:`run_innovations` over rows ``0 … m−1`` (``m = len(accept)``) with
+    ``settings``, a window at a time, keeping the sums of the accepted innovations instead
+    of the series."""
+    m = accept.size
     tau = settings.delay
     if tau >= m:
         raise ConfigError(f"sensor delay of {tau} samples is not shorter than the log ({m})")
@@ -314,7 +322,7 @@ def _fit_windows(
     state: FilterState | None = None
     for a in range(0, m - tau, window):
         z = min(a + window, m - tau)
-        prepared = filt.prepare(read(a, z + tau), window=(a, m, settings))
+        prepared = filt.prepare(read(a, z + tau), accept[a : z + tau], window=(a, m, settings))
         if state is None:
             state = filt.initial_state(prepared)
         for b in range(0, z - a, REGRESSOR_BLOCK):

@@ -24,6 +24,7 @@ import sys
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -43,6 +44,7 @@ ROOT = Path(__file__).resolve().parents[1]
 MIB = 1024 * 1024
 USED = ("u1", "u2", "y")  # what the planned run reads: its table's axes and its output
 RATE_HZ = 100.0
+RANGE_GATE = {"type": "range", "channel": "u2", "max": 60.0}  # rejects about 7 %
 
 _WORKER = """
 import gc, json, sys
@@ -126,15 +128,20 @@ def _add_dataset(db: Database, store_url: str, signals: Signals, name: str) -> i
         return dataset.id
 
 
-def _add_run(db: Database, dataset_id: int) -> int:
-    """An ``skf`` run on the dataset, planned and stored as ``POST /api/runs`` does it."""
+def _add_run(db: Database, dataset_id: int, config: dict[str, Any]) -> int:
+    """An ``skf`` run on the dataset with service ``config`` (e.g. its gates), planned and
+    stored as ``POST /api/runs`` does it."""
     service = RunService(db, Settings(database_url=db.url), executor=None)
     with db.write() as s:
-        return service.store_in(s, RunRequest(**run_body(dataset_id))).id
+        return service.store_in(s, RunRequest(**run_body(dataset_id, **config))).id
 
 
-def workbench(directory: Path, rows: int, channels: int) -> Workbench:
-    """The database (SQLite) and store under ``directory``, with both runs queued."""
+def workbench(
+    directory: Path, rows: int, channels: int, config: dict[str, Any] | None = None
+) -> Workbench:
+    """The database (SQLite) and store under ``directory``, with both runs queued (with
+    the run config ``config``, e.g. ``{"gates": [...]}``)."""
+    config = config or {}
     database_url = f"sqlite:///{directory / 'mapwise.db'}"
     store_url = (directory / "store").as_uri()
     upgrade(database_url, store_url=store_url)
@@ -146,7 +153,11 @@ def workbench(directory: Path, rows: int, channels: int) -> Workbench:
         measured = _add_dataset(db, store_url, signals, "wide")
         del signals
         return Workbench(
-            database_url, store_url, _add_run(db, warm), _add_run(db, measured), log_bytes
+            database_url,
+            store_url,
+            _add_run(db, warm, config),
+            _add_run(db, measured, config),
+            log_bytes,
         )
     finally:
         db.dispose()
@@ -178,13 +189,18 @@ def main() -> None:
     parser.add_argument("--rows", type=int, default=2_000_000)
     parser.add_argument("--channels", type=int, default=12)
     parser.add_argument("--code", type=Path, default=ROOT, help="the checkout to execute")
+    parser.add_argument(
+        "--gate", action="store_true", help="with a range gate on u2 (<= 60 mg/stroke)"
+    )
     args = parser.parse_args()
+    config = {"gates": [RANGE_GATE]} if args.gate else {}
     with tempfile.TemporaryDirectory(prefix="mapwise-run-memory-") as tmp:
-        bench = workbench(Path(tmp), args.rows, args.channels)
+        bench = workbench(Path(tmp), args.rows, args.channels, config)
         peak = worker_peak(bench, args.code.resolve())
     print(
         f"{args.rows} rows × {args.channels} channels ({bench.log_bytes / MIB:.0f} MiB as "
-        f"float64), skf on {', '.join(USED)}: run {peak.status}, worker RSS "
+        f"float64), skf on {', '.join(USED)}{' gated' if args.gate else ''}: run {peak.status}, "
+        "worker RSS "
         f"{peak.before_bytes / MIB:.0f} MiB before the run, peak {peak.peak_bytes / MIB:.0f} "
         f"MiB: +{peak.growth_bytes / MIB:.0f} MiB"
     )

@@ -20,7 +20,7 @@ Everything is vectorised numpy over the whole log (no per-sample Python).
 from __future__ import annotations
 
 import math
-from collections.abc import Collection, Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass
 from typing import Annotated, Any, Literal
 
@@ -31,6 +31,7 @@ from app.io.errors import InputError
 from estimation import Signals
 
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+SCAN_ROWS = 1 << 16  # rows of a streamed log a gate scan reads at a time (one row group)
 
 
 class _Gate(BaseModel):
@@ -144,40 +145,94 @@ def gate_labels(gates: Sequence[RangeGate | RateGate | HoldoffGate]) -> list[str
     return labels
 
 
-def gate_mask(gate: RangeGate | RateGate | HoldoffGate, signals: Signals) -> np.ndarray:
-    """``(n,)`` bool, True where ``gate`` rejects the sample."""
-    x = signals[gate.channel]
-    t = signals.time
-    if isinstance(gate, RangeGate):
-        low = -math.inf if gate.min is None else gate.min
-        high = math.inf if gate.max is None else gate.max
-        return (x < low) | (x > high)
-    if isinstance(gate, RateGate):
-        if x.size < 2:
-            return np.zeros(x.size, dtype=bool)
-        rate = np.abs(np.diff(x) / np.diff(t))
-        return np.concatenate([rate[:1], rate]) > gate.max_abs
-    event = x < gate.below if gate.below is not None else x > gate.above
-    last_event = np.maximum.accumulate(np.where(event, t, -np.inf))
-    return (t - last_event) <= gate.seconds
+class GateScan:
+    """The gates' masks over a log fed in consecutive windows of rows: the same masks as
+    over the whole log, since each gate carries what it needs across a window's edge (the
+    rate gate the previous sample, the holdoff gate its last event's time). A streamed run
+    (`docs/data-formats.md#streamed-runs`) computes its masks so, never holding the log."""
+
+    def __init__(self, gates: Sequence[RangeGate | RateGate | HoldoffGate], n: int) -> None:
+        self.gates = list(gates)
+        self.labels = gate_labels(self.gates)
+        self.n = n
+        self.masks = [np.zeros(n, dtype=bool) for _ in self.gates]
+        self.filled = 0
+        self.previous: Signals | None = None  # the last sample fed (the rate gate's)
+        self.last_event = [-math.inf] * len(self.gates)  # per holdoff gate
+
+    def feed(self, rows: Signals) -> None:
+        """Samples ``filled … filled + len(rows) − 1`` of the log."""
+        a, z = self.filled, self.filled + len(rows)
+        if z > self.n:
+            raise ValueError(f"fed {z} samples of a log of {self.n}")
+        if a == 0 and len(rows) < min(2, self.n):
+            raise ValueError("the first window needs two samples (the rate gate's first)")
+        for i, gate in enumerate(self.gates):
+            self.masks[i][a:z] = self._mask(i, gate, rows)
+        if len(rows):
+            self.previous = rows.slice(len(rows) - 1, len(rows))
+        self.filled = z
+
+    def _mask(self, i: int, gate: RangeGate | RateGate | HoldoffGate, rows: Signals) -> np.ndarray:
+        """``(len(rows),)`` bool, True where ``gate`` rejects the sample (module docstring)."""
+        x, t = rows[gate.channel], rows.time
+        if isinstance(gate, RangeGate):
+            low = -math.inf if gate.min is None else gate.min
+            high = math.inf if gate.max is None else gate.max
+            return (x < low) | (x > high)
+        if isinstance(gate, RateGate):
+            if self.previous is None:
+                if x.size < 2:
+                    return np.zeros(x.size, dtype=bool)
+                rate = np.abs(np.diff(x) / np.diff(t))
+                return np.concatenate([rate[:1], rate]) > gate.max_abs
+            x0, t0 = self.previous[gate.channel], self.previous.time
+            rate = np.abs(np.diff(np.concatenate([x0, x])) / np.diff(np.concatenate([t0, t])))
+            return rate > gate.max_abs
+        event = x < gate.below if gate.below is not None else x > gate.above
+        last_event = np.maximum.accumulate(np.where(event, t, -np.inf))
+        np.maximum(last_event, self.last_event[i], out=last_event)
+        if last_event.size:
+            self.last_event[i] = float(last_event[-1])
+        return (t - last_event) <= gate.seconds
+
+    def result(self) -> GateResult:
+        """Accept mask and rejection counts, once the whole log is fed."""
+        if self.filled != self.n:
+            raise ValueError(f"{self.filled} of {self.n} samples fed")
+        masks = dict(zip(self.labels, self.masks, strict=True))
+        accept = np.ones(self.n, dtype=bool)
+        rejected: dict[str, int] = {}
+        for label, mask in masks.items():
+            rejected[label] = int(np.count_nonzero(mask & accept))
+            accept &= ~mask
+        failed = {label: int(np.count_nonzero(mask)) for label, mask in masks.items()}
+        return GateResult(accept, masks, rejected, failed)
 
 
 def apply_gates(
     gates: Sequence[RangeGate | RateGate | HoldoffGate], signals: Signals
 ) -> GateResult:
-    """Accept mask and rejection counts of ``gates`` over ``signals``."""
-    n = len(signals)
-    masks = {
-        label: gate_mask(gate, signals)
-        for label, gate in zip(gate_labels(gates), gates, strict=True)
-    }
-    accept = np.ones(n, dtype=bool)
-    rejected: dict[str, int] = {}
-    for label, mask in masks.items():
-        rejected[label] = int(np.count_nonzero(mask & accept))
-        accept &= ~mask
-    failed = {label: int(np.count_nonzero(mask)) for label, mask in masks.items()}
-    return GateResult(accept, masks, rejected, failed)
+    """Accept mask and rejection counts of ``gates`` over ``signals``, held whole."""
+    scan = GateScan(gates, len(signals))
+    scan.feed(signals)
+    return scan.result()
+
+
+def scan_gates(
+    gates: Sequence[RangeGate | RateGate | HoldoffGate],
+    read: Callable[[int, int], Signals],
+    n: int,
+    *,
+    window: int = SCAN_ROWS,
+) -> GateResult:
+    """:func:`apply_gates` over a log of ``n`` samples read ``window`` rows at a time
+    (``read(a, z)`` gives rows ``a … z−1`` with the gates' channels): the same result, with
+    only the masks (a byte a sample a gate) spanning the log."""
+    scan = GateScan(gates, n)
+    for a in range(0, n, max(window, 2)):
+        scan.feed(read(a, min(a + max(window, 2), n)))
+    return scan.result()
 
 
 def nearest_cell(idx: np.ndarray, w: np.ndarray) -> np.ndarray:

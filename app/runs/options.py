@@ -29,16 +29,14 @@ class RunOptions:
     gates: list[dict[str, Any]]
 
 
-def streams_input(spec: EstimatorSpec, config: dict[str, Any], dataset: Dataset) -> bool:
+def streams_input(spec: EstimatorSpec, dataset: Dataset) -> bool:
     """Whether a run reads its log a window at a time from the store, never whole
     (`docs/data-formats.md#streamed-runs`): when nothing in it needs the whole log — a map
     filter (:meth:`~estimation.filters.estimator.TableFilter.run_windows`) on a dense
-    uploaded dataset (no truth to score, nothing to resample) without sample gates."""
+    uploaded dataset (no truth to score, nothing to resample). Its sample gates are scanned
+    a window at a time too (:func:`app.runs.gates.scan_gates`)."""
     return (
-        spec.kind == EstimatorKind.MAP_FILTER
-        and dataset.scenario is None
-        and not dataset.recorded
-        and not config.get("gates")
+        spec.kind == EstimatorKind.MAP_FILTER and dataset.scenario is None and not dataset.recorded
     )
 
 

@@ -408,7 +408,13 @@ class RunResults:
                 output = config.get("output", "")
                 unit = config.get("output_unit") or self.log.units.get(output, "")
                 result = holdout_error_windows(
-                    self.spec.name, config, self.log.rows, self.n, unit=unit, timeline=self.log.time
+                    self.spec.name,
+                    config,
+                    self.log.rows,
+                    self.n,
+                    unit=unit,
+                    timeline=self.log.time,
+                    accept=accept,
                 )
             else:
                 check = self.spec.holdout_check()

@@ -30,7 +30,7 @@ from app.errors import SupersededError
 from app.io.payload import unpack_truth
 from app.runs.attempt import Attempt, database
 from app.runs.context import WorkerContext
-from app.runs.gates import apply_gates, gate_channels, parse_gates
+from app.runs.gates import apply_gates, gate_channels, parse_gates, scan_gates
 from app.runs.limits import out_of_memory_message
 from app.runs.live import LiveTicks, Publish
 from app.runs.options import run_options, run_raster, streams_input
@@ -152,15 +152,19 @@ class RunSession:
         if raster is not None and raster.channel is not None:
             names.append(raster.channel)
         store = open_store(self.ctx.store_url)
-        self.accept = None
-        if streams_input(spec, self.run.config, dataset):
+        known = [c.name for c in dataset.channels]
+        if streams_input(spec, dataset):
             rows = open_rows(store, loaded.samples, dataset.channels, names)
             log = self.closing.enter_context(rows)
             self.rate_hz = dataset.rate_hz
             self.options = run_options(
                 self.run.config, log.n, self.rate_hz, self.ctx.version_fraction
             )
-            self.results = RunResults(self.run, spec, dataset, log, truth, None)
+            gates = None
+            if self.options.gates:
+                parsed = parse_gates(self.options.gates, known, field="config.gates")
+                gates = scan_gates(parsed, log.rows, log.n)
+            self.results = RunResults(self.run, spec, dataset, log, truth, gates)
         else:
             read = load_on_raster(store, loaded.samples, dataset.channels, names, raster=raster)
             signals = read.signals
@@ -172,11 +176,10 @@ class RunSession:
             )
             gates = None
             if self.options.gates:
-                known = [c.name for c in dataset.channels]
                 parsed = parse_gates(self.options.gates, known, field="config.gates")
                 gates = apply_gates(parsed, signals)
-            self.accept = None if gates is None else gates.accept
             self.results = RunResults(self.run, spec, dataset, signals, truth, gates)
+        self.accept = None if self.results.gates is None else self.results.gates.accept
         self.state: Any = None
         if loaded.resume is not None:
             self.state = load_state(loaded.resume.state)
@@ -245,7 +248,12 @@ class RunSession:
         assert isinstance(self.estimator, TableFilter)
         log = results.log
         return self.estimator.run_windows(
-            log.rows, results.n, every=every, state=self.state, timeline=log.time
+            log.rows,
+            results.n,
+            every=every,
+            state=self.state,
+            timeline=log.time,
+            accept=self.accept,
         )
 
     def _check_stop(self, snap: Snapshot) -> None:

@@ -23,8 +23,10 @@ refit (``h = cost.holdout_passes``: 1, or 0 for an estimator without a truth-fre
 since the refit runs while the run's own data are held), and the dataset (its Parquet object
 as read from the artifact store, and the unpacked channels); a streamed run keeps only its
 per-sample outputs and status codes for the whole log, and at its end the RMSE's copy of
-the accepted residuals. The compute time counts the
-refit's work the same way.
+the accepted residuals. A run with ``g`` sample gates holds ``(2 · g + 3) · n`` bytes more:
+each gate's mask and first-gate share, the accept mask and the first gate rejecting each
+sample (a streamed run scans its gates a window at a time, :func:`app.runs.gates.scan_gates`).
+The compute time counts the refit's work the same way.
 """
 
 from __future__ import annotations
@@ -46,6 +48,11 @@ FLOAT_BYTES = 8
 STREAM_SAMPLE_BYTES = 11
 """What a streamed run keeps per sample besides its outputs: the status code (1 byte), and at
 its end the RMSE's copy of the accepted residuals (8) and its two masks (2)."""
+GATE_MASK_BYTES = 2
+"""What each sample gate keeps per sample: its mask and its first-gate share (1 byte each)."""
+GATES_SAMPLE_BYTES = 3
+"""What a gated run keeps per sample besides the masks: the accept mask (1 byte) and the
+index of the first gate rejecting each sample (2)."""
 STREAM_ROWS = 1 << 20
 """Rows a streamed run holds at most: its window (``WINDOW_STEPS`` of
 :mod:`estimation.filters.estimator`), the decoded row groups it caches
@@ -143,6 +150,7 @@ def admit_run(
     limits: Limits,
     table_field: str = "table.axes",
     streamed: bool = False,
+    gates: int = 0,
 ) -> Prediction:
     """Check a planned run against ``limits``; an :class:`OverBudgetError` naming the field
     to change if it does not fit, else the predicted figures."""
@@ -152,6 +160,8 @@ def admit_run(
     data = FLOAT_BYTES * 2 * channels * held
     if streamed:
         data += (FLOAT_BYTES * len(spec.output_units) + STREAM_SAMPLE_BYTES) * samples
+    if gates:
+        data += (GATE_MASK_BYTES * gates + GATES_SAMPLE_BYTES) * samples
     memory = WORKER_BASE_BYTES + cost.run_memory_bytes(cells, held, corners=corners) + data
     if memory > limits.run_memory_bytes:
         grows_with_table = cost.run_memory_bytes(cells, 0, corners=corners) > data

@@ -306,7 +306,8 @@ def plan_run(
             pace=options.pace,
             limits=limits,
             table_field="table.axes" if axes is not None else "config",
-            streamed=streams_input(spec, config, dataset),
+            streamed=streams_input(spec, dataset),
+            gates=len(options.gates),
         )
     try:
         estimator = spec.build(model)

@@ -165,6 +165,7 @@ class TableFilter(ChunkedEstimator[FilterState, Prepared]):
         state: FilterState | None = None,
         window: int = WINDOW_STEPS,
         timeline: Callable[[], np.ndarray] | None = None,
+        accept: np.ndarray | None = None,
     ) -> Iterator[Snapshot]:
         """:meth:`run` over a log of ``n`` samples that is never held whole.
 
@@ -176,7 +177,8 @@ class TableFilter(ChunkedEstimator[FilterState, Prepared]):
         so snapshots, states and outputs are :meth:`run`'s bit for bit
         (``tests/estimation/test_run_windows.py``). A delay in seconds is resolved, as by
         :meth:`run`, on the whole log's sample period: ``timeline()`` gives its time column
-        (default: ``read(0, n).time``, the log read whole once).
+        (default: ``read(0, n).time``, the log read whole once). ``accept`` is :meth:`run`'s
+        ``(n,)`` mask of the samples the filter may learn from (a byte a sample).
         """
         chunk = int(every)
         if chunk < 1:
@@ -185,11 +187,15 @@ class TableFilter(ChunkedEstimator[FilterState, Prepared]):
         tau = settings.delay
         if tau >= n:
             raise ConfigError(f"sensor delay of {tau} samples is not shorter than the log ({n})")
+        if accept is not None and np.shape(accept) != (n,):
+            raise ShapeError(f"accept mask has shape {np.shape(accept)}, the log has {n} samples")
         steps = n - tau
         span = max(1, -(-window // chunk)) * chunk
 
         def prepared(a: int, z: int) -> Prepared:
-            return self.prepare(read(a, min(z + tau, n)), window=(a, n, settings))
+            end = min(z + tau, n)
+            mask = None if accept is None else accept[a:end]
+            return self.prepare(read(a, end), mask, window=(a, n, settings))
 
         if state is None:
             state = self.initial_state(prepared(0, min(span, steps)))

@@ -107,23 +107,31 @@ def test_adapted_nox_map_beats_the_base_map_on_held_out_nedc_data(estimator: str
 
 @pytest.mark.parametrize("kind", ["kf", "skf", "sskf", "rls", "nlms"])
 @pytest.mark.parametrize("sensor", [None, {"lag": 0.7, "delay_samples": 4, "sigma_f": 0.05}])
-def test_the_windowed_holdout_is_the_whole_log_holdout(kind: str, sensor: dict | None) -> None:
+@pytest.mark.parametrize("gated", [None, "gated"])
+def test_the_windowed_holdout_is_the_whole_log_holdout(
+    kind: str, sensor: dict | None, gated: str | None
+) -> None:
     """Read a window at a time (a streamed run's check), the held-out errors and the
-    innovation statistics are the whole-log ones up to rounding, the frozen map bit for bit."""
+    innovation statistics are the whole-log ones up to rounding, the frozen map bit for bit,
+    with and without an accept mask (a gated run's)."""
     signals = log(4000, sigma_v=0.5, lag=0.7 if sensor else 0.0, delay=4 if sensor else 0)
     extra = {} if sensor is None or kind not in ("kf", "skf", "sskf") else {"sensor": sensor}
     if kind == "rls":
         extra |= {"forgetting": 0.995}
     cfg = config(**extra)
     cfg = {k: v for k, v in cfg.items() if k in get_spec(kind).config_model.model_fields}
-    whole = holdout_error(kind, cfg, signals)
+    accept = None if gated is None else np.random.default_rng(4).random(len(signals)) > 0.25
+    whole = holdout_error(kind, cfg, signals, accept=accept)
     reads: list[tuple[int, int]] = []
 
     def read(a: int, z: int) -> Signals:
         reads.append((a, z))
         return signals.slice(a, z)
 
-    windowed = holdout_error_windows(kind, cfg, read, len(signals), unit="ppm", window=333)
+    windowed = holdout_error_windows(
+        kind, cfg, read, len(signals), unit="ppm", window=333, accept=accept
+    )
+    assert windowed.scored == whole.scored
     np.testing.assert_array_equal(windowed.table.values, whole.table.values)
     assert windowed.metrics().keys() == whole.metrics().keys()
     for key, value in whole.metrics().items():

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from estimation.errors import SignalError
+from estimation.errors import ShapeError, SignalError
 from estimation.estimator import Snapshot
 from estimation.filters.estimator import TableFilter
 from estimation.registry import get_spec
@@ -89,6 +89,28 @@ def test_windows_give_the_whole_log_run_bit_for_bit(kind: str, sensor: str) -> N
     tau = 3 if with_sensor else 0
     assert len(read.calls) > N // 500  # it did read in windows
     assert max(z - a for a, z in read.calls) <= 485 + tau  # 5 chunks of 97 and the delay
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_an_accept_mask_gives_the_whole_log_run_with_it(kind: str) -> None:
+    """A gated streamed run: ``accept`` sliced with each window (and its delay rows) gives
+    :meth:`TableFilter.run` with the same mask, bit for bit, masked steps status 1."""
+    with_sensor = kind in SENSOR_KINDS
+    problem = random_problem(13, n=N, shape=(5, 4), sensor=Sensor(0.6, 3, 0.05))
+    config = problem.config(kind) if with_sensor else problem.without_sensor().config(kind)
+    signals = problem.signals()
+    accept = np.random.default_rng(13).random(N) > 0.2
+    whole = list(_filter(kind, config).run(signals, every=97, accept=accept))
+    windowed = list(
+        _filter(kind, config).run_windows(Reader(signals), N, every=97, window=400, accept=accept)
+    )
+    assert len(windowed) == len(whole)
+    for a, b in zip(whole, windowed, strict=True):
+        _same(a, b)
+    status = np.concatenate([s.status for s in windowed])
+    assert np.count_nonzero(status == 1) > N // 10
+    with pytest.raises(ShapeError, match="accept mask"):
+        next(_filter(kind, config).run_windows(Reader(signals), N, every=97, accept=accept[1:]))
 
 
 @pytest.mark.parametrize("kind", KINDS)

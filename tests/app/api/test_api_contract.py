@@ -14,7 +14,10 @@ from fastapi.testclient import TestClient
 
 from app.cli import main as cli_main
 from app.db.migrate import head_revision
+from app.io.csv_files import read_csv
+from app.runs.gates import apply_gates, parse_gates
 from estimation.filters.estimator import WINDOW_STEPS
+from estimation.holdout import holdout_error
 from tests.support.helpers import (
     TABLE,
     TRUE_MAP,
@@ -22,6 +25,7 @@ from tests.support.helpers import (
     U2,
     final_values,
     log_csv,
+    reference_run,
     run_body,
     start_run,
     upload,
@@ -514,3 +518,40 @@ def test_a_streamed_run_over_several_windows_equals_mapwise_adapt(
     metrics = client.get(f"/api/runs/{done['id']}").json()["metrics"]
     assert metrics["samples"] == WINDOW_STEPS * 5 // 2
     assert metrics["holdout:samples"] > 0
+
+
+@pytest.mark.slow
+def test_a_gated_streamed_run_equals_the_whole_log_run_with_its_gates(
+    client: TestClient, tmp_path: Path
+) -> None:
+    """Sample gates on a streamed run (docs/data-formats.md#streamed-runs): scanned a row
+    group at a time, their accept mask rides along with each window. The final map is the
+    whole-log fit with the whole-log gates' mask, bit for bit; the per-gate counts and the
+    held-out check (fitted and scored on the accepted samples) are the whole log's."""
+    n = WINDOW_STEPS * 5 // 4  # two filter windows, five row groups
+    text = log_csv(n, seed=8, rate_hz=100.0)  # temp = 60 + 40 sin(k/300): up to 13 degC/s
+    dataset = upload_ok(client, text)
+    gates = [
+        {"type": "range", "channel": "u2", "max": 60.0},
+        {"type": "rate", "channel": "temp", "max_abs": 10.0},
+        {"type": "holdoff", "channel": "temp", "below": 25.0, "seconds": 2.0},
+    ]
+    body = run_body(dataset["id"], gates=gates)
+    done = wait_run(client, start_run(client, body)["id"], timeout=300)
+    assert done["status"] == "succeeded", done["error"]
+    path = tmp_path / "log.csv"
+    path.write_text(text)
+    signals = read_csv(path).signals
+    expected = apply_gates(parse_gates(gates, signals.names), signals)
+    assert all(count > n // 50 for count in expected.rejected.values()), expected.rejected
+    assert {k: v for k, v in done["rejected"].items() if k.startswith("gate:")} == {
+        f"gate:{k}": v for k, v in expected.rejected.items()
+    }
+    reference = reference_run(text, tmp_path, "skf", accept=expected.accept)
+    np.testing.assert_array_equal(final_values(client, done["id"])["values"], reference["values"])
+    axes = [a | {"unit": signals.units[a["name"]]} for a in TABLE["axes"]]
+    config = run_body(0)["config"] | {"axes": axes, "output": "y", "output_unit": "ppm"}
+    holdout = holdout_error("skf", config, signals, accept=expected.accept).metrics()
+    metrics = client.get(f"/api/runs/{done['id']}").json()["metrics"]
+    assert metrics["holdout:samples"] == holdout["holdout:samples"]
+    assert metrics["holdout:rmse"] == pytest.approx(holdout["holdout:rmse"], rel=1e-9)

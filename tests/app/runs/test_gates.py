@@ -17,6 +17,7 @@ from app.runs.gates import (
     nearest_cell,
     parse_gates,
     rejected_per_cell,
+    scan_gates,
 )
 from estimation import Signals
 from estimation.table import Axis, Grid
@@ -81,6 +82,30 @@ def test_each_gate_matches_the_per_sample_reference(raw: dict) -> None:
     (mask,) = result.masks.values()
     np.testing.assert_array_equal(mask, expected)
     np.testing.assert_array_equal(result.accept, ~expected)
+
+
+@pytest.mark.parametrize("window", [2, 3, 97, 1000, 5000])
+def test_a_scan_a_window_at_a_time_gives_the_whole_log_gates(window: int) -> None:
+    """A streamed run's gates (rate and holdoff carry across a window's edge) equal the
+    whole log's, bit for bit, and the scan reads each row once, ``window`` at a time."""
+    signals = drive()
+    gates = parse_gates(GATES, signals.names)
+    whole = apply_gates(gates, signals)
+    reads: list[tuple[int, int]] = []
+
+    def read(a: int, z: int) -> Signals:
+        reads.append((a, z))
+        return signals.slice(a, z)
+
+    scanned = scan_gates(gates, read, len(signals), window=window)
+    assert scanned.masks.keys() == whole.masks.keys()
+    for label, mask in whole.masks.items():
+        np.testing.assert_array_equal(scanned.masks[label], mask)
+    np.testing.assert_array_equal(scanned.accept, whole.accept)
+    assert (scanned.rejected, scanned.failed) == (whole.rejected, whole.failed)
+    assert [z - a for a, z in reads] == [
+        min(window, len(signals) - a) for a in range(0, len(signals), window)
+    ]
 
 
 def test_holdoff_covers_exactly_the_seconds_after_the_event() -> None:

@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 from estimation.filters.estimator import WINDOW_STEPS
-from scripts.run_memory import MIB, workbench, worker_peak
+from scripts.run_memory import MIB, RANGE_GATE, workbench, worker_peak
 
 ROWS = 1 << 18  # four of the store's 64k-row groups; 82 MiB of float64 at 40 channels
 WIDE, NARROW = 40, 4
@@ -43,19 +43,24 @@ def test_unread_channels_cost_a_run_no_memory(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
-def test_a_streamed_run_holds_a_window_of_its_log_not_the_log(tmp_path: Path) -> None:
+@pytest.mark.parametrize("gates", [[], [RANGE_GATE]], ids=["ungated", "gated"])
+def test_a_streamed_run_holds_a_window_of_its_log_not_the_log(
+    tmp_path: Path, gates: list[dict]
+) -> None:
     """A map filter on an uploaded log reads it a window at a time (WINDOW_STEPS rows,
     docs/data-formats.md#streamed-runs). From a log of 2 windows to one of 10, the worker's
     peak grows by what it keeps per sample — the two outputs and the status code, 17 bytes,
-    and the final RMSE's copy of the accepted residuals, 8 — not by the log's channels: a run
-    holding its log whole (time and three channels, 32 bytes a sample) grows by more than
-    that alone, its outputs and scoring on top (about 75 bytes a sample)."""
+    and the final RMSE's copy of the accepted residuals, 8; with a sample gate its masks,
+    scanned a row group at a time (5 bytes) — not by the log's channels: a run holding its
+    log whole (time and three channels, 32 bytes a sample) grows by more than that alone,
+    its outputs and scoring on top (about 75 bytes a sample)."""
     growth, rows = {}, {}
     for windows in (2, 10):
         directory = tmp_path / f"w{windows}"
         directory.mkdir()
         rows[windows] = windows * WINDOW_STEPS
-        peak = worker_peak(workbench(directory, rows[windows], NARROW), timeout_s=300)
+        bench = workbench(directory, rows[windows], NARROW, {"gates": gates})
+        peak = worker_peak(bench, timeout_s=300)
         assert peak.status == "succeeded"
         growth[windows] = peak.growth_bytes
     per_sample = (growth[10] - growth[2]) / (rows[10] - rows[2])

@@ -15,6 +15,8 @@ from app.api.app import create_app
 from app.domain import Channel, Dataset
 from app.errors import InvalidRequestError
 from app.services.admission import (
+    GATE_MASK_BYTES,
+    GATES_SAMPLE_BYTES,
     STREAM_ROWS,
     STREAM_SAMPLE_BYTES,
     WORKER_BASE_BYTES,
@@ -141,6 +143,23 @@ def test_a_streamed_run_is_predicted_from_its_window_and_its_outputs() -> None:
     assert (
         short - _admit("skf", 216, samples=1000).memory_bytes == (16 + STREAM_SAMPLE_BYTES) * 1000
     )
+
+
+def test_a_gated_run_is_predicted_with_its_masks() -> None:
+    """Each sample gate keeps its mask and first-gate share for the whole log, and a gated
+    run its accept mask and each sample's first rejecting gate: ``(2·g + 3)`` bytes a
+    sample, streamed or not; a plan with gates passes its count (and is still streamed)."""
+    for streamed in (False, True):
+        plain = _admit("skf", 216, samples=10_000, streamed=streamed).memory_bytes
+        gated = _admit("skf", 216, samples=10_000, streamed=streamed, gates=3).memory_bytes
+        assert gated - plain == (GATE_MASK_BYTES * 3 + GATES_SAMPLE_BYTES) * 10_000
+    gates = [
+        {"type": "range", "channel": "u1", "min": 1.0},
+        {"type": "rate", "channel": "y", "max_abs": 5.0},
+    ]
+    plain = _plan(_request()).prediction.memory_bytes
+    gated = _plan(_request(gates=gates)).prediction.memory_bytes
+    assert gated - plain == (GATE_MASK_BYTES * 2 + GATES_SAMPLE_BYTES) * 3000
 
 
 def test_versions_over_budget_suggest_a_cadence() -> None:
