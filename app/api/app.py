@@ -94,7 +94,7 @@ def create_app(settings: Settings | None = None, *, execute_runs: bool = True) -
             datasets=DatasetService(
                 db,
                 open_store(settings.store_url),
-                simulate_in_child=True,
+                in_child=True,
                 memory_mb=settings.run_memory_mb,
             ),
             runs=run_service,

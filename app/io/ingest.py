@@ -20,6 +20,7 @@ Validation common to all formats: at least one channel besides time, at least
 
 from __future__ import annotations
 
+import io
 import os
 import re
 from collections.abc import Mapping, Sequence
@@ -248,12 +249,32 @@ def _read_bounded(
         if size > max_bytes:
             raise _too_large(size, max_bytes)
         with open(source, "rb") as f:
-            data = f.read(max_bytes + 1)
+            data = _read_at_most(f, max_bytes + 1)
     else:
-        data = source.read(max_bytes + 1)
+        data = _read_at_most(source, max_bytes + 1)
     if len(data) > max_bytes:
         raise _too_large(len(data), max_bytes)
     return data
+
+
+def _read_at_most(file: BinaryIO, limit: int) -> bytes:
+    """The rest of ``file``, at most ``limit`` bytes, allocating no more than that: ``read(n)``
+    reserves ``n`` bytes up front, which a process under a memory limit (the dataset child)
+    cannot give when ``n`` is the upload limit rather than the file's size."""
+    try:
+        here = file.tell()
+        size = file.seek(0, io.SEEK_END) - here
+        file.seek(here)
+    except (AttributeError, OSError, ValueError):  # not seekable: a block at a time
+        chunks, total = [], 0
+        while total < limit:
+            chunk = file.read(min(1 << 20, limit - total))
+            if not chunk:
+                break
+            chunks.append(chunk)
+            total += len(chunk)
+        return b"".join(chunks)
+    return file.read(min(size + 1, limit))
 
 
 def _too_large(size: int, max_bytes: int) -> InputError:

@@ -163,7 +163,7 @@ def _read_tracks(data: bytes, wanted: set[str] | None, notes: list[str]) -> tupl
                     _check_time(kept[0].time, g, master)
                     first_master = first_master or master
                     tracks.extend(kept)
-    except InputError:
+    except (InputError, MemoryError):
         raise
     except Exception as exc:
         raise InputError(

@@ -31,7 +31,8 @@ from app.io.errors import too_large
 from app.io.ingest import IngestLimits, ParsedLog, detect_format, ingest
 from app.io.names import check_name, without_refused
 from app.io.payload import pack_truth
-from app.services.simulation import SimulationRequest, Simulator
+from app.services.admission import human_bytes
+from app.services.dataset_child import DatasetChild, SimulationRequest, WholeUpload
 from app.store import (
     ArtifactStore,
     StagedDataset,
@@ -52,6 +53,41 @@ from estimation.signals import Signals
 
 NAME_MAX = 200
 log = logging.getLogger("mapwise.datasets")
+
+
+HERE_MAX_BYTES = 1 << 20
+"""A CSV smaller than this is read whole in the server even with a dataset child: pyarrow's
+reader is loaded there anyway, the parse holds a few MiB, and a hop to the child would cost
+more than it."""
+WHOLE_READ_FACTOR = {"csv": 6.0, "mdf4": 5.0, "mcap": 20.0}
+"""Peak memory of a whole read per byte of the file, by format (measured 4.6 for a sparse
+CSV, 3.8 for an MDF4 log and 16.4 for an MCAP log of JSON messages, scripts/whole_read.py,
+docs/data-formats.md#whole-reads): an upload predicted over the memory budget is refused
+before it is read."""
+
+
+def _sized(source: BinaryIO | bytes | os.PathLike[str]) -> tuple[int, str]:
+    """The upload's size in bytes and its format (:func:`detect_format`; the file rewound)."""
+    with _opened(source) as file:
+        size = file.seek(0, io.SEEK_END)
+        file.seek(0)
+        head = file.read(4096)
+        file.seek(0)
+    return size, detect_format(head)
+
+
+def check_whole_read(size: int, kind: str, memory_mb: float | None) -> None:
+    """413 naming ``file`` when reading a ``kind`` file of ``size`` bytes whole is predicted
+    (:data:`WHOLE_READ_FACTOR`) to need more than ``memory_mb`` (``None``: no budget)."""
+    if memory_mb is None:
+        return
+    predicted = WHOLE_READ_FACTOR[kind] * size
+    if predicted > memory_mb * 2**20:
+        raise too_large(
+            f"reading this {kind.upper()} file of {human_bytes(size)} whole needs about "
+            f"{human_bytes(predicted)} (predicted) > {memory_mb:g} MiB budget "
+            "(MAPWISE_RUN_MEMORY_MB); upload a dense CSV, which streams, or fewer channels"
+        )
 
 
 def _dataset_name(name: str | None, filename: str | None, fallback: str) -> str:
@@ -106,19 +142,19 @@ class DatasetService:
         db: Database,
         store: ArtifactStore | None = None,
         *,
-        simulate_in_child: bool = False,
+        in_child: bool = False,
         memory_mb: float | None = None,
     ) -> None:
         self.db = db
         self.store = store or open_store()
-        self.simulator: Simulator | None = None
-        if simulate_in_child and db.shared and self.store.shared:
-            self.simulator = Simulator(db.url, self.store.url, memory_mb)
+        self.child: DatasetChild | None = None
+        if in_child and db.shared and self.store.shared:
+            self.child = DatasetChild(db.url, self.store.url, memory_mb)
 
     def close(self) -> None:
-        """End the simulating child, if one was started."""
-        if self.simulator is not None:
-            self.simulator.close()
+        """End the dataset child, if one was started."""
+        if self.child is not None:
+            self.child.close()
 
     def _store(
         self, signals: Signals | ParsedLog, add: Callable[[DatasetRepo], Dataset]
@@ -188,7 +224,11 @@ class DatasetService:
 
         A dense CSV of at least ``stream_min_bytes`` without a raster streams into the store
         (:mod:`app.io.csv_stream`): the process never holds the whole log. Anything else is
-        read whole, and refused (413) over ``max_whole_bytes`` (default ``max_bytes``)."""
+        read whole (:meth:`upload_whole`), and refused (413) over ``max_whole_bytes``
+        (default ``max_bytes``); with ``in_child`` (the server's setting), by the dataset
+        child (:mod:`app.services.dataset_child`) under the ``memory_mb`` budget, but for a
+        CSV under :data:`HERE_MAX_BYTES`; refused (413) before it is read when predicted over
+        that budget (:func:`check_whole_read`)."""
         given = _dataset_name(name, filename, "")  # a bad name fails before the file is read
         whole = max_bytes if max_whole_bytes is None else min(max_whole_bytes, max_bytes)
         if raster is None:
@@ -204,21 +244,45 @@ class DatasetService:
             )
             if streamed is not None:
                 return streamed
-        limits = IngestLimits(max_bytes=whole, max_decompressed_bytes=max_decompressed_bytes)
-        parsed = ingest(
-            source,
+        upload = WholeUpload(
+            name=given,
             units=units,
-            limits=limits,
-            channels=channels,
+            channels=None if channels is None else list(channels),
             raster=raster,
             rate_hz=rate_hz,
+            max_bytes=whole,
+            max_decompressed_bytes=max_decompressed_bytes,
+        )
+        if self.child is None:
+            return self.upload_whole(source, upload)
+        size, kind = _sized(source)
+        if kind == "csv" and size < HERE_MAX_BYTES:
+            return self.upload_whole(source, upload)
+        check_whole_read(size, kind, self.child.memory_mb)
+        return self.get(self.child.upload(source, upload))
+
+    def upload_whole(
+        self, source: BinaryIO | bytes | os.PathLike[str], upload: WholeUpload
+    ) -> Dataset:
+        """:meth:`upload` of a file read whole, in this process: parsed and validated whole
+        (:func:`~app.io.ingest.ingest`), then stored."""
+        limits = IngestLimits(
+            max_bytes=upload.max_bytes, max_decompressed_bytes=upload.max_decompressed_bytes
+        )
+        parsed = ingest(
+            source,
+            units=upload.units,
+            limits=limits,
+            channels=upload.channels,
+            raster=upload.raster,
+            rate_hz=upload.rate_hz,
             time_required=True,
         )
         timing = _timing(parsed)
         return self._store(
             parsed,
             lambda repo: repo.add(
-                name=given or f"{parsed.source} upload",
+                name=upload.name or f"{parsed.source} upload",
                 source=parsed.source,
                 rows=parsed.rows,
                 rate_hz=parsed.rate_hz,
@@ -310,15 +374,15 @@ class DatasetService:
         """Simulate ``scenario`` and store it with its truth. ``progress``, when given, is
         what the build reports its integrator's steps into (:mod:`estimation.progress`).
 
-        With ``simulate_in_child`` (the server's setting) a child process simulates and
-        stores it under the ``memory_mb`` budget (:mod:`app.services.simulation`), unless the
+        With ``in_child`` (the server's setting) the dataset child simulates and stores it
+        under the ``memory_mb`` budget (:mod:`app.services.dataset_child`), unless the
         database or the store lives in this process's memory, where no child could reach it.
         """
         self.check_simulation(scenario, duration_s, name)
         request = SimulationRequest(scenario, seed, name, duration_s, mismatch)
-        if self.simulator is None:
+        if self.child is None:
             return self.simulate_here(request, progress)
-        return self.get(self.simulator.simulate(request, progress))
+        return self.get(self.child.simulate(request, progress))
 
     def simulate_here(self, request: SimulationRequest, progress: Progress | None) -> Dataset:
         """:meth:`simulate` in this process."""

@@ -28,6 +28,7 @@ U2 = [0.0, 20.0, 40.0, 60.0]
 TABLE = {"axes": [{"name": "u1", "breakpoints": U1}, {"name": "u2", "breakpoints": U2}]}
 FINISHED = ("succeeded", "failed", "cancelled", "interrupted")
 PORT_ATTEMPTS = 5
+DATASET_CHILD = "mw-datasets"  # app.services.dataset_child.PROCESS_NAME (this imports no app)
 
 
 class PortTakenError(RuntimeError):
@@ -204,13 +205,13 @@ class Server:
         return out
 
     def workers(self) -> list[int]:
-        """Process ids of the server's run workers: its spawned processes but the simulating
-        child (``mw-simulate``, app/services/simulation.py)."""
+        """Process ids of the server's run workers: its spawned processes but the dataset
+        child (``mw-datasets``, app/services/dataset_child.py)."""
         out = []
         for pid in self.children():
             try:
                 spawned = b"spawn_main" in Path(f"/proc/{pid}/cmdline").read_bytes()
-                if spawned and Path(f"/proc/{pid}/comm").read_text().strip() != "mw-simulate":
+                if spawned and Path(f"/proc/{pid}/comm").read_text().strip() != DATASET_CHILD:
                     out.append(pid)
             except OSError:  # gone meanwhile
                 pass
