@@ -46,16 +46,24 @@ USED = ("u1", "u2", "y")  # what the planned run reads: its table's axes and its
 RATE_HZ = 100.0
 RANGE_GATE = {"type": "range", "channel": "u2", "max": 60.0}  # rejects about 7 %
 
-_WORKER = """
-import gc, json, sys
+PEAK_HELPERS = """
+import gc
 from pathlib import Path
-from app.runs.worker import WorkerContext, execute_run
 
 def kib(field):
     for line in Path("/proc/self/status").read_text().splitlines():
         if line.startswith(field + ":"):
             return int(line.split()[1])
     raise OSError(field)
+"""
+"""``kib(field)`` of /proc/self/status, for the measuring processes' scripts (this one's and
+scripts/whole_read.py's)."""
+
+_WORKER = (
+    PEAK_HELPERS
+    + """
+import json, sys
+from app.runs.worker import WorkerContext, execute_run
 
 url, store, warm, run = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
 context = WorkerContext(database_url=url, store_url=store, live_fps=1.0)
@@ -67,6 +75,7 @@ status = execute_run(run, context)
 print(json.dumps({"warm": warmed, "status": status, "before_kib": before,
                   "peak_kib": kib("VmHWM")}))
 """
+)
 
 
 @dataclass(frozen=True, slots=True)

@@ -23,20 +23,14 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-MIB = 1024 * 1024
+from scripts.run_memory import MIB, PEAK_HELPERS, ROOT
 
-_READER = """
-import gc, json, sys
-from pathlib import Path
+_READER = (
+    PEAK_HELPERS
+    + """
+import json, sys
 import asammdf, mcap.reader, pyarrow.csv  # loaded before the baseline
 from app.io.ingest import ingest
-
-def kib(field):
-    for line in Path("/proc/self/status").read_text().splitlines():
-        if line.startswith(field + ":"):
-            return int(line.split()[1])
-    raise OSError(field)
 
 gc.collect()
 Path("/proc/self/clear_refs").write_text("5")  # VmHWM := VmRSS (Linux >= 4.0)
@@ -45,6 +39,7 @@ with open(sys.argv[1], "rb") as file:
     parsed = ingest(file, time_required=True)
 print(json.dumps({"rows": parsed.rows, "growth_kib": kib("VmHWM") - before}))
 """
+)
 
 
 def write_sparse_csv(path: Path, rows: int) -> Path:
