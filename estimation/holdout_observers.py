@@ -18,7 +18,7 @@ covariance, so NIS does not exist for it; its output error of the fit pass,
 backward-Euler sample), is summarised by :func:`~estimation.innovation.output_error_stats`.
 
 **EKF** (docs/algorithms.md §4). Fit: the filter over the first part, with its innovations
-``e_j`` and variances ``S_j`` per used output (:mod:`estimation.kernels.ekf_innovation`);
+``e_j`` and variances ``S_j`` per used output (kept by :func:`~estimation.kernels.ekf.ekf_kernel`);
 NIS of the MAF updates the χ² gate accepted, as :mod:`estimation.innovation`. Predict: the
 filter continues from its posterior at ``m − 1`` with every sample masked, i.e. the model
 propagated open loop from the inputs with the bias ``b`` (Aug) or map ``θ`` (Map) frozen;
@@ -45,7 +45,6 @@ from estimation.innovation import (
     output_error_stats,
 )
 from estimation.kernels import ekf as kern
-from estimation.kernels.ekf_innovation import ekf_innovation_kernel
 from estimation.metrics import output_metrics
 from estimation.observers.ekf import EkfModel, EkfObserver, EkfSettings, EkfState, ekf_run
 from estimation.observers.ekf_config import OUTPUT_NAMES
@@ -223,7 +222,8 @@ def ekf_innovations(
     state: EkfState, model: EkfModel, settings: EkfSettings, stop: int
 ) -> EkfInnovations:
     """:func:`~estimation.observers.ekf.ekf_run` from ``state`` to ``stop``, keeping every
-    scalar update's ``e`` and ``S`` (:mod:`estimation.kernels.ekf_innovation`)."""
+    scalar update's ``e`` and ``S`` (the ``e_out``, ``s_out`` of
+    :func:`~estimation.kernels.ekf.ekf_kernel`)."""
     start = state.step
     out = state.copy()
     k = stop - start
@@ -232,7 +232,7 @@ def ekf_innovations(
     yhat = np.empty((k, kern.N_Y))
     status = np.empty(k, dtype=np.int8)
     e, s = np.empty((k, kern.N_Y)), np.empty((k, kern.N_Y))
-    ekf_innovation_kernel(
+    kern.ekf_kernel(
         out.x, out.P, out.mem, out.counts, settings.mode, settings.g, model.time_s, model.U,
         model.Y, settings.use, settings.r_abs2, settings.r_rel2, model.accept,
         settings.q_rate, settings.p0_diag, settings.limit, settings.gate2,

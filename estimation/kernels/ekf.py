@@ -479,6 +479,8 @@ def ekf_kernel(
     yhat_out: np.ndarray,
     corr_out: np.ndarray,
     status_out: np.ndarray,
+    e_out: np.ndarray,
+    s_out: np.ndarray,
 ) -> None:
     """Filter log samples ``start … stop−1``, advancing ``x`` (m,), ``P`` (m, m), ``mem``
     (2,) and ``counts`` in place (whole-log arrays ``time``, ``U`` (n, 4), ``Y`` (n, 4),
@@ -516,6 +518,11 @@ def ekf_kernel(
 
     ``status_out``: 0 all used outputs accepted, 1 sample masked, 2 an output gated. A state
     pushed out of the plant's safety box is projected back and ``counts[C_CLAMP]`` counted.
+
+    ``e_out``, ``s_out`` (``stop − start``, N_Y), unless empty: each scalar update's
+    innovation ``e`` and its variance ``s`` of step 3, as its χ² gate tests them (gated or
+    not), NaN where the output is not used or the sample masked (docs/tuning.md#innovations:
+    the EKF's NIS and likelihood).
     """
     m = x.shape[0]
     H = np.empty(m)
@@ -529,9 +536,14 @@ def ekf_kernel(
     xs = np.empty(N_X)
     grad = np.empty(N_X)
     work = new_work()
+    innovations = e_out.shape[0] > 0
     for k in range(start, stop):
         o = k - start
         clamped = False
+        if innovations:
+            for j in range(N_Y):
+                e_out[o, j] = math.nan
+                s_out[o, j] = math.nan
         if k > 0:
             dt = time[k] - time[k - 1]
             n_sub = max(math.ceil(dt / max_step_s - 1e-9), 1)
@@ -592,6 +604,9 @@ def ekf_kernel(
                         d += H[c] * v[c]
                 s = d + r
                 e = Y[k, j] - yhat
+                if innovations:
+                    e_out[o, j] = e
+                    s_out[o, j] = s
                 if e * e > gate2 * s:
                     counts[C_GATE + j] += 1
                     status = REJECTED_GATE

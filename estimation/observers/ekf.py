@@ -82,6 +82,7 @@ __all__ = [
 ]
 
 VARIANTS = ("ekf-def", "ekf-aug", "ekf-map")
+NO_INNOVATIONS = np.empty((0, 0))  # ekf_kernel's e_out, s_out when a run keeps no innovations
 
 
 def _mode_code(kind: str) -> int:
@@ -291,6 +292,8 @@ def ekf_run(
         yhat,
         corr,
         status,
+        NO_INNOVATIONS,
+        NO_INNOVATIONS,
     )
     new = dataclasses.replace(
         out,

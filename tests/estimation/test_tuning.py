@@ -164,7 +164,7 @@ def test_tune_ekf_aug_lands_within_two_of_the_logged_maf_sigma(
     """ekf-aug under nominal mismatch, held-out seeds, σ_rel started at the single reading's
     1 % (3.2× the logged σ: the averaging forgotten). Measured against 3.16·10⁻³:
     maf-1d-whtc 1.78, 2.71, 2.44 ·10⁻³; maf-whtc 2.57, 2.81, 2.75 ·10⁻³
-    (docs/tuning.md#ekf); 15–20 s a case alone, up to 60 s beside another job."""
+    (docs/tuning.md#ekf); about 8 s a case alone."""
     scenario = get_scenario(scenario_name)
     data = scenario.build(seed=seed, duration_s=EKF_SECONDS, mismatch="nominal")
     truth = logged_maf_sigma_rel(data)
