@@ -20,7 +20,9 @@ is wrong. Both paths give the same channels, units, notes and values
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import BinaryIO, Protocol
 
@@ -52,6 +54,42 @@ class RowSink(Protocol):
         ...
 
     def abort(self) -> None: ...
+
+
+class _Pipelined:
+    """A :class:`RowSink` whose writes run on a thread of their own, one block behind the
+    parse: block ``i`` is compressed and written while block ``i + 1`` is read and parsed
+    (pyarrow releases the GIL in both), so the two use both cores. At most one block waits
+    to be written; a write that failed raises at the next call, in order."""
+
+    def __init__(self, sink: RowSink) -> None:
+        self.sink = sink
+        self.pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="mapwise-csv-write")
+        self.pending: Future[None] | None = None
+
+    def write(self, time: np.ndarray, values: Sequence[np.ndarray]) -> None:
+        self._wait()
+        self.pending = self.pool.submit(self.sink.write, time, values)
+
+    def close(self) -> str:
+        try:
+            self._wait()
+            return self.sink.close()
+        finally:
+            self.pool.shutdown()
+
+    def abort(self) -> None:
+        try:
+            with contextlib.suppress(Exception):  # the reason is already being raised
+                self._wait()
+            self.sink.abort()
+        finally:
+            self.pool.shutdown()
+
+    def _wait(self) -> None:
+        pending, self.pending = self.pending, None
+        if pending is not None:
+            pending.result()
 
 
 class NotDense(Exception):  # noqa: N818 - a reason to read the file whole, not an error
@@ -120,7 +158,7 @@ def stream_csv(
     if header.time_column is None:
         notes.append(f"no time column: rows taken at the given rate of {rate_hz:g} Hz")
     source.seek(skip + len(text[: header.body_start].encode("utf-8")))
-    writer = open_sink([(n, header.units[n]) for n in kept])
+    writer = _Pipelined(open_sink([(n, header.units[n]) for n in kept]))
     try:
         steps = _stream_body(source, header, kept, rate_hz, writer)
     except BaseException:

@@ -227,6 +227,71 @@ def test_tabs_and_form_feeds_in_a_comment_still_stream(monkeypatch: pytest.Monke
     assert _stream(text.replace(b"# marker 2000", b"# marker\t\x0c 2000")).rows == ROWS
 
 
+class _RecordingSink:
+    """A sink that records its calls, in order, and fails its ``fail_at``-th write."""
+
+    def __init__(self, fail_at: int | None = None) -> None:
+        self.calls: list[tuple[str, float]] = []
+        self.fail_at = fail_at
+
+    def write(self, time: np.ndarray, values: object) -> None:
+        self.calls.append(("write", float(time[0])))
+        if sum(c[0] == "write" for c in self.calls) == self.fail_at:
+            raise OSError("no space left on device")
+
+    def close(self) -> str:
+        self.calls.append(("close", 0.0))
+        return "0" * 64
+
+    def abort(self) -> None:
+        self.calls.append(("abort", 0.0))
+
+
+def _stream_into(sink: _RecordingSink, data: bytes) -> StreamedCsv:
+    return stream_csv(
+        io.BytesIO(data),
+        lambda channels: sink,
+        units=None,
+        time_column=None,
+        channels=None,
+        rate_hz=None,
+        max_header_bytes=65536,
+        max_channels=100,
+        min_samples=2,
+    )
+
+
+def test_blocks_are_written_in_order_one_behind_the_parse(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The writes run on their own thread (parse and write overlap), yet the sink sees every
+    block in order and the close after the last; a failed write stops the stream with its
+    error at the next block, the blocks after it never written, and the sink aborted; a
+    file found not dense late aborts the sink after its pending write."""
+    monkeypatch.setattr("app.io.csv_stream.BLOCK_BYTES", 4096)
+    data = _text(_rows()).encode()
+    sink = _RecordingSink()
+    assert _stream_into(sink, data).rows == ROWS
+    writes = [t for name, t in sink.calls if name == "write"]
+    assert len(writes) > 20
+    assert writes == sorted(writes)
+    assert sink.calls[-1][0] == "close"
+    assert [name for name, _ in sink.calls].count("close") == 1
+
+    failing = _RecordingSink(fail_at=3)
+    with pytest.raises(OSError, match="no space left"):
+        _stream_into(failing, data)
+    assert [name for name, _ in failing.calls] == ["write"] * 3 + ["abort"]
+
+    lines = _text(_rows(40_000)).encode().split(b"\n")  # past the first MiB read as a head
+    lines[-100] += b"\x07"  # a control character near the end
+    late = _RecordingSink()
+    with pytest.raises(NotDense, match="control character"):
+        _stream_into(late, b"\n".join(lines))
+    names = [name for name, _ in late.calls]
+    assert names[-1] == "abort"
+    assert "close" not in names
+    assert names.count("write") > 5
+
+
 def test_more_channels_than_the_limit_do_not_stream() -> None:
     """Without a time column every column is a channel: the limit counts them all."""
     header = ",".join(f"c{j}" for j in range(101))
