@@ -62,9 +62,8 @@ more than it."""
 WHOLE_READ_FACTOR = {"csv": 6.0, "mdf4": 5.0, "mcap": 20.0}
 """Peak memory of a whole read per byte of the file, by format (measured 4.6 for a sparse
 CSV, 3.8 for an MDF4 log and 14.7–16.4 for an MCAP log of JSON messages,
-scripts/whole_read.py,
-docs/data-formats.md#whole-reads): an upload predicted over the memory budget is refused
-before it is read."""
+scripts/whole_read.py, docs/data-formats.md#whole-reads): an upload predicted over the
+memory budget is refused before it is read."""
 
 
 def _sized(source: BinaryIO | bytes | os.PathLike[str]) -> tuple[int, str]:
