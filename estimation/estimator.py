@@ -11,14 +11,14 @@ estimators by name is :mod:`estimation.registry`.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from typing import Any, Generic, Protocol, TypeVar
+from typing import Any, ClassVar, Generic, Protocol, TypeVar
 
 import numpy as np
 from pydantic import BaseModel, ValidationError
 
-from estimation.errors import ConfigError, StateError
+from estimation.errors import ConfigError, ShapeError, StateError
 from estimation.signals import Signals
 from estimation.state import EstimatorState
 from estimation.table import Grid, Table
@@ -75,6 +75,22 @@ class Estimator(Protocol):
     def fit(self, signals: Signals, *, accept: np.ndarray | None = None) -> Snapshot: ...
 
 
+#: Kernel steps a window of :meth:`ChunkedEstimator.run_windows` holds (rounded to whole
+#: chunks): its rows are the most of the log a streamed run has in memory at once.
+WINDOW_STEPS = 1 << 18
+
+
+@dataclass(frozen=True, slots=True)
+class WindowPlan:
+    """How :meth:`ChunkedEstimator.run_windows` reads a log: ``steps`` kernel steps in all,
+    each window with ``extra_rows`` rows after its last step (a sensor delay's), and the
+    whole-log ``context`` each window is prepared with (resolved settings, sample period)."""
+
+    steps: int
+    extra_rows: int
+    context: Any
+
+
 @dataclass(frozen=True, slots=True, eq=False)
 class Chunk:
     """Log samples ``first:sample`` just run, and their per-sample ``outputs``."""
@@ -103,6 +119,7 @@ class ChunkedEstimator(ABC, Generic[S, P]):
     state_class: type[S]
     grid: Grid | None = None  # the map's grid, when the state's ``theta`` holds its values
     noun: str = "estimator"  # in messages: "state of a 'kf' filter cannot resume 'skf'"
+    windowed: ClassVar[bool] = False  # plans and prepares windows: run_windows streams a log
 
     @abstractmethod
     def required_signals(self) -> list[str]:
@@ -217,6 +234,73 @@ class ChunkedEstimator(ABC, Generic[S, P]):
             start = state.step
             state, outputs, status = self.advance(state, prepared, min(start + chunk, steps))
             yield self.snapshot(state, prepared, start, outputs, status)
+
+    def plan_windows(self, n: int, timeline: Callable[[], np.ndarray]) -> WindowPlan:
+        """The :class:`WindowPlan` of a log of ``n`` samples whose time column ``timeline()``
+        gives (read only if the plan needs it). An estimator that sets ``windowed`` says how;
+        one that needs more of the whole log than its time column cannot."""
+        raise NotImplementedError(f"{self.name} reads its log whole")
+
+    def prepare_window(
+        self, signals: Signals, accept: np.ndarray | None, offset: int, n: int, context: Any
+    ) -> P:
+        """:meth:`prepare` for rows ``offset …`` (``signals``) of a log of ``n`` samples, with
+        the plan's ``context``; ``accept`` is the mask of those rows."""
+        raise NotImplementedError(f"{self.name} reads its log whole")
+
+    def run_windows(
+        self,
+        read: Callable[[int, int], Signals],
+        n: int,
+        *,
+        every: int,
+        state: S | None = None,
+        window: int = WINDOW_STEPS,
+        timeline: Callable[[], np.ndarray] | None = None,
+        accept: np.ndarray | None = None,
+    ) -> Iterator[Snapshot]:
+        """:meth:`run` over a log of ``n`` samples that is never held whole.
+
+        ``read(a, z)`` gives the log's rows ``a … z−1`` (its time and the channels the
+        estimator reads). The estimator reads ``window`` kernel steps at a time, rounded up to
+        whole chunks of ``every`` steps counted from where the run starts (a resumed run reads
+        from its state's step on), each window with the plan's extra rows after it (a sensor
+        delay's). The kernel carries its state across windows as across chunks, so snapshots,
+        states and outputs are :meth:`run`'s bit for bit (``tests/estimation/
+        test_run_windows.py``). What a window needs of the whole log comes from the plan
+        (:meth:`plan_windows`): ``timeline()`` gives the time column (default: ``read(0,
+        n).time``, the log read whole once). ``accept`` is :meth:`run`'s ``(n,)`` mask of the
+        samples the estimator may learn from (a byte a sample).
+        """
+        chunk = int(every)
+        if chunk < 1:
+            raise ConfigError(f"every must be >= 1 sample, got {every}")
+        if accept is not None and np.shape(accept) != (n,):
+            raise ShapeError(f"accept mask has shape {np.shape(accept)}, the log has {n} samples")
+        plan = self.plan_windows(n, timeline or (lambda: read(0, n).time))
+        steps = plan.steps
+        span = max(1, -(-window // chunk)) * chunk
+
+        def prepared(a: int, z: int) -> tuple[Signals, P]:
+            end = min(z + plan.extra_rows, n)
+            mask = None if accept is None else accept[a:end]
+            rows = read(a, end)
+            return rows, self.prepare_window(rows, mask, a, n, plan.context)
+
+        if state is None:
+            state = self.start(*prepared(0, min(span, steps)))
+        self.check_state(state, steps)
+        if state.step == steps:
+            last = prepared(max(steps - 1, 0), steps)[1]
+            yield self.snapshot(state, last, steps, {}, np.empty(0, np.int8))
+            return
+        while state.step < steps:
+            part = prepared(state.step, min(state.step + span, steps))[1]
+            end = self.steps(part)
+            while state.step < end:
+                start = state.step
+                state, outputs, status = self.advance(state, part, min(start + chunk, end))
+                yield self.snapshot(state, part, start, outputs, status)
 
     def fit(self, signals: Signals, *, accept: np.ndarray | None = None) -> Snapshot:
         """Run over the whole log in one chunk and return the final snapshot."""

@@ -35,7 +35,8 @@ from pydantic import BaseModel
 
 from estimation import kernels
 from estimation.errors import ConfigError, ShapeError
-from estimation.filters.estimator import REGRESSOR_BLOCK, WINDOW_STEPS, Prepared, TableFilter
+from estimation.estimator import WINDOW_STEPS
+from estimation.filters.estimator import REGRESSOR_BLOCK, Prepared, TableFilter
 from estimation.filters.functions import run_chunk
 from estimation.filters.settings import FilterSettings
 from estimation.filters.state import FilterState

@@ -3,7 +3,7 @@ and their registry specs."""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from estimation.errors import ConfigError, ShapeError
-from estimation.estimator import Chunk, ChunkedEstimator, Snapshot
+from estimation.estimator import Chunk, ChunkedEstimator, WindowPlan
 from estimation.filters.config import (
     KfConfig,
     NlmsConfig,
@@ -37,10 +37,6 @@ REJECTION_REASONS = ("mask", "innovation", "delay")
 #: log's rows (64 B a step in 2-D), and a long fit does not fault in fresh pages for them,
 #: which on a VM costs more than the kernel itself.
 REGRESSOR_BLOCK = 1 << 16
-
-#: Kernel steps a window of :meth:`TableFilter.run_windows` holds (rounded to whole chunks):
-#: its rows are the most of the log a streamed run has in memory at once.
-WINDOW_STEPS = 1 << 18
 
 
 @dataclass(frozen=True, eq=False)
@@ -87,6 +83,7 @@ class TableFilter(ChunkedEstimator[FilterState, Prepared]):
 
     state_class = FilterState
     noun = "filter"
+    windowed = True
 
     def __init__(self, name: str, config: TableFilterConfig) -> None:
         self.name = name
@@ -156,61 +153,25 @@ class TableFilter(ChunkedEstimator[FilterState, Prepared]):
         period = signals.sample_period() if needs_period else None
         return resolve_settings(self.config, self.grid, sample_period_s=period)
 
-    def run_windows(
-        self,
-        read: Callable[[int, int], Signals],
-        n: int,
-        *,
-        every: int,
-        state: FilterState | None = None,
-        window: int = WINDOW_STEPS,
-        timeline: Callable[[], np.ndarray] | None = None,
-        accept: np.ndarray | None = None,
-    ) -> Iterator[Snapshot]:
-        """:meth:`run` over a log of ``n`` samples that is never held whole.
-
-        ``read(a, z)`` gives the log's rows ``a … z−1`` (its time and the channels the filter
-        reads). The filter reads ``window`` kernel steps at a time, rounded up to whole chunks
-        of ``every`` steps counted from where the run starts (a resumed run reads from its
-        state's step on), each window with the τ rows after it that its last measurements
-        need (sensor delay). The kernel carries its state across windows as across chunks,
-        so snapshots, states and outputs are :meth:`run`'s bit for bit
-        (``tests/estimation/test_run_windows.py``). A delay in seconds is resolved, as by
-        :meth:`run`, on the whole log's sample period: ``timeline()`` gives its time column
-        (default: ``read(0, n).time``, the log read whole once). ``accept`` is :meth:`run`'s
-        ``(n,)`` mask of the samples the filter may learn from (a byte a sample).
-        """
-        chunk = int(every)
-        if chunk < 1:
-            raise ConfigError(f"every must be >= 1 sample, got {every}")
-        settings = self.settings_on(n, timeline or (lambda: read(0, n).time))
+    def plan_windows(self, n: int, timeline: Callable[[], np.ndarray]) -> WindowPlan:
+        """A window of :meth:`run_windows` reads the τ rows after its last step, which its
+        last measurements need (sensor delay); a delay in seconds is resolved, as by
+        :meth:`run`, on the whole log's sample period (``timeline()``)."""
+        settings = self.settings_on(n, timeline)
         tau = settings.delay
         if tau >= n:
             raise ConfigError(f"sensor delay of {tau} samples is not shorter than the log ({n})")
-        if accept is not None and np.shape(accept) != (n,):
-            raise ShapeError(f"accept mask has shape {np.shape(accept)}, the log has {n} samples")
-        steps = n - tau
-        span = max(1, -(-window // chunk)) * chunk
+        return WindowPlan(steps=n - tau, extra_rows=tau, context=settings)
 
-        def prepared(a: int, z: int) -> Prepared:
-            end = min(z + tau, n)
-            mask = None if accept is None else accept[a:end]
-            return self.prepare(read(a, end), mask, window=(a, n, settings))
-
-        if state is None:
-            state = self.initial_state(prepared(0, min(span, steps)))
-        self.check_state(state, steps)
-        if state.step == steps:
-            last = prepared(max(steps - 1, 0), steps)
-            yield self.snapshot(state, last, steps, {}, np.empty(0, np.int8))
-            return
-        while state.step < steps:
-            part = prepared(state.step, min(state.step + span, steps))
-            end = self.steps(part)
-            while state.step < end:
-                start = state.step
-                state, outputs, status = self.advance(state, part, min(start + chunk, end))
-                yield self.snapshot(state, part, start, outputs, status)
+    def prepare_window(
+        self,
+        signals: Signals,
+        accept: np.ndarray | None,
+        offset: int,
+        n: int,
+        context: FilterSettings,
+    ) -> Prepared:
+        return self.prepare(signals, accept, window=(offset, n, context))
 
     def settings_on(self, n: int, timeline: Callable[[], np.ndarray]) -> FilterSettings:
         """:meth:`settings_for` a log of ``n`` samples whose time column ``timeline()`` gives,

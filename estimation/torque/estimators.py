@@ -17,6 +17,7 @@ State is explicit (:class:`TorqueState`): frozen, serialisable, with the step co
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -24,7 +25,7 @@ import numpy as np
 
 from estimation import kernels
 from estimation.errors import ConfigError, ShapeError, StateError
-from estimation.estimator import ChunkedEstimator
+from estimation.estimator import ChunkedEstimator, WindowPlan
 from estimation.registry import Cost, EstimatorKind, EstimatorSpec, family
 from estimation.signals import Signals
 from estimation.state import EstimatorState
@@ -176,11 +177,15 @@ def run_chunk(
 @dataclass(frozen=True, slots=True, eq=False)
 class TorquePrepared:
     """A log turned into kernel inputs: ``speed_rpm``, ``load_nm`` (and ``air_kg_s``) as
-    contiguous float64 arrays, the sample times and the (uniform) sample period."""
+    contiguous float64 arrays, the sample times and the (uniform) sample period; a window of
+    :meth:`~estimation.estimator.ChunkedEstimator.run_windows` holds rows ``offset …`` of a
+    log of ``total`` samples (0: these rows are the log)."""
 
     inputs: dict[str, np.ndarray]
     time_s: np.ndarray
     sample_period_s: float
+    offset: int = 0
+    total: int = 0
 
 
 class TorqueEstimator(ChunkedEstimator[TorqueState, TorquePrepared]):
@@ -191,6 +196,7 @@ class TorqueEstimator(ChunkedEstimator[TorqueState, TorquePrepared]):
     """
 
     state_class = TorqueState
+    windowed = True
 
     def __init__(self, name: str, config: TorqueEstimatorConfig) -> None:
         if name not in CONFIGS:
@@ -225,9 +231,24 @@ class TorqueEstimator(ChunkedEstimator[TorqueState, TorquePrepared]):
         return initial_state(self.name, self.config)
 
     def prepare(self, signals: Signals, accept: np.ndarray | None = None) -> TorquePrepared:
+        return self._prepared(signals, accept, signals.sample_period())
+
+    def plan_windows(self, n: int, timeline: Callable[[], np.ndarray]) -> WindowPlan:
+        """Every window is prepared with the whole log's sample period (``timeline()``)."""
+        time = timeline()
+        if time.size != n:
+            raise ConfigError(f"the time column has {time.size} samples, the log {n}")
+        return WindowPlan(steps=n, extra_rows=0, context=Signals(time, {}).sample_period())
+
+    def prepare_window(
+        self, signals: Signals, accept: np.ndarray | None, offset: int, n: int, context: float
+    ) -> TorquePrepared:
+        prepared = self._prepared(signals, accept, context)
+        return dataclasses.replace(prepared, offset=offset, total=n)
+
+    def _prepared(self, signals: Signals, accept: np.ndarray | None, ts: float) -> TorquePrepared:
         signals.require(self.required_signals())
         n = len(signals)
-        ts = signals.sample_period()
         if accept is not None:
             mask = np.asarray(accept, dtype=bool)
             if mask.shape != (n,):
@@ -245,7 +266,7 @@ class TorqueEstimator(ChunkedEstimator[TorqueState, TorquePrepared]):
         return TorquePrepared(inputs, signals.time, ts)
 
     def steps(self, prepared: TorquePrepared) -> int:
-        return int(prepared.time_s.size)
+        return prepared.offset + int(prepared.time_s.size)
 
     def start(self, signals: Signals, prepared: TorquePrepared) -> TorqueState:
         return self.initial_state()
@@ -267,7 +288,8 @@ class TorqueEstimator(ChunkedEstimator[TorqueState, TorquePrepared]):
         self, state: TorqueState, prepared: TorquePrepared, stop: int
     ) -> tuple[TorqueState, dict[str, np.ndarray], np.ndarray]:
         start = state.step
-        part = {name: v[start:stop] for name, v in prepared.inputs.items()}
+        a, z = start - prepared.offset, stop - prepared.offset
+        part = {name: v[a:z] for name, v in prepared.inputs.items()}
         state, outputs = run_chunk(
             state, self.config, part, sample_period_s=prepared.sample_period_s
         )
@@ -275,6 +297,12 @@ class TorqueEstimator(ChunkedEstimator[TorqueState, TorquePrepared]):
 
     def times(self, prepared: TorquePrepared) -> np.ndarray:
         return prepared.time_s
+
+    def n_samples(self, prepared: TorquePrepared) -> int:
+        return prepared.total or int(prepared.time_s.size)
+
+    def time_of(self, prepared: TorquePrepared, sample: int) -> float:
+        return float(prepared.time_s[max(sample - 1, 0) - prepared.offset])
 
 
 TORQUE_COST = Cost(

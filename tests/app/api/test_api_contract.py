@@ -16,7 +16,7 @@ from app.cli import main as cli_main
 from app.db.migrate import head_revision
 from app.io.csv_files import read_csv
 from app.runs.gates import apply_gates, parse_gates
-from estimation.filters.estimator import WINDOW_STEPS
+from estimation.estimator import WINDOW_STEPS
 from estimation.holdout import holdout_error
 from tests.support.helpers import (
     TABLE,

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from estimation.filters.estimator import WINDOW_STEPS
+from estimation.estimator import WINDOW_STEPS
 from scripts.run_memory import MIB, RANGE_GATE, workbench, worker_peak
 
 ROWS = 1 << 18  # four of the store's 64k-row groups; 82 MiB of float64 at 40 channels
