@@ -138,6 +138,24 @@ def unmeasured_input(
     return UNMEASURED_INPUT
 
 
+def unmeasured_input_windows(
+    estimator: str,
+    config: BaseModel | dict[str, Any],
+    read: Callable[[int, int], Signals],
+    n: int,
+    *,
+    unit: str = "",
+    fraction: float = DEFAULT_FIT_FRACTION,
+    window: int = WINDOW_STEPS,
+    timeline: Callable[[], np.ndarray] | None = None,
+    accept: np.ndarray | None = None,
+) -> NotApplicable:
+    """:func:`unmeasured_input` of a log never held whole (nothing is read); the arguments are
+    :func:`holdout_error_windows`'s."""
+    split_point(n, fraction)
+    return UNMEASURED_INPUT
+
+
 def split_point(n: int, fraction: float) -> int:
     """``m = round(fraction · n)``, the first held-out sample; ``fraction`` in (0, 1)."""
     if not 0.0 < fraction < 1.0:

@@ -173,6 +173,22 @@ class EstimatorSpec:
         module, attr = (self.holdout or HOLDOUT[self.kind]).split(":")
         return getattr(importlib.import_module(module), attr)  # type: ignore[no-any-return]
 
+    @property
+    def streams(self) -> bool:
+        """Its runs can read their log a window at a time: its estimator plans windows
+        (:meth:`~estimation.estimator.ChunkedEstimator.run_windows`) and its kind's check has
+        a windowed form (:data:`HOLDOUT_WINDOWS`; a spec's own ``holdout`` has none)."""
+        return self.holdout is None and self.kind in HOLDOUT_WINDOWS
+
+    def holdout_check_windows(self) -> Callable[..., Any]:
+        """:meth:`holdout_check` over a log never held whole (:data:`HOLDOUT_WINDOWS`), called
+        as ``f(name, config, read, n, *, unit, timeline, accept)``; only when it
+        :attr:`streams`."""
+        if not self.streams:
+            raise ConfigError(f"{self.name} runs read their log whole")
+        module, attr = HOLDOUT_WINDOWS[self.kind].split(":")
+        return getattr(importlib.import_module(module), attr)  # type: ignore[no-any-return]
+
     def config(self, config: BaseModel | dict[str, Any]) -> BaseModel:
         """``config`` validated against the estimator's model (a :class:`ConfigError` if not)."""
         if isinstance(config, self.config_model):
@@ -256,6 +272,16 @@ HOLDOUT: Mapping[EstimatorKind, str] = MappingProxyType(
 )
 """The truth-free check of each kind, as ``"module:function"`` (imported on first use); a
 spec's own ``holdout`` overrides it (docs/tuning.md#which-runs-report-what)."""
+
+HOLDOUT_WINDOWS: Mapping[EstimatorKind, str] = MappingProxyType(
+    {
+        EstimatorKind.MAP_FILTER: "estimation.holdout:holdout_error_windows",
+        EstimatorKind.TORQUE: "estimation.holdout:unmeasured_input_windows",
+    }
+)
+"""The kinds whose runs stream their log (docs/data-formats.md#streamed-runs): their
+estimators run in windows and their truth-free check, here as ``"module:function"``, reads
+the log a window at a time too."""
 
 
 BUILTIN: tuple[str, ...] = (

@@ -4,8 +4,9 @@
 
 builds a SQLite database and an artifact store in a temporary directory, stores a dataset
 of ``u1 [rpm]``, ``u2 [mg/stroke]`` and ``y [ppm]`` (the 4×4 map of the service tests,
-plus noise) and ``CHANNELS − 3`` further noise channels, plans an ``skf`` run on it as
-``POST /api/runs`` would, and executes that run in a fresh worker process
+plus noise) and ``CHANNELS − 3`` further noise channels, plans an ``skf`` run on it (or, with
+``--estimator``, a torque estimator reading ``u1`` as its speed, ``y`` as its load and ``u2``
+as its air flow) as ``POST /api/runs`` would, and executes that run in a fresh worker process
 (:func:`app.runs.worker.execute_run`). The worker first executes the same run on a short
 log (imports, JIT compilation, database connections), then resets its peak resident set
 (``/proc/self/clear_refs``) and executes the measured run: the printed growth is its peak
@@ -45,6 +46,8 @@ MIB = 1024 * 1024
 USED = ("u1", "u2", "y")  # what the planned run reads: its table's axes and its output
 RATE_HZ = 100.0
 RANGE_GATE = {"type": "range", "channel": "u2", "max": 60.0}  # rejects about 7 %
+TORQUE_ESTIMATORS = ("uio", "smo", "dirty", "adaptive-const", "adaptive-tv")
+TORQUE_CHANNELS = {"speed_channel": "u1", "load_channel": "y"}  # an adaptive law's air: u2
 
 PEAK_HELPERS = """
 import gc
@@ -137,19 +140,34 @@ def _add_dataset(db: Database, store_url: str, signals: Signals, name: str) -> i
         return dataset.id
 
 
-def _add_run(db: Database, dataset_id: int, config: dict[str, Any]) -> int:
-    """An ``skf`` run on the dataset with service ``config`` (e.g. its gates), planned and
-    stored as ``POST /api/runs`` does it."""
+def _add_run(db: Database, dataset_id: int, estimator: str, config: dict[str, Any]) -> int:
+    """A run of ``estimator`` on the dataset with service ``config`` (e.g. its gates), planned
+    and stored as ``POST /api/runs`` does it: a map filter over the 4×4 table with output
+    ``y``, a torque estimator with ``u1`` for its speed and ``y`` for its load."""
+    if estimator in TORQUE_ESTIMATORS:
+        air = {"air_channel": "u2"} if estimator.startswith("adaptive") else {}
+        body = {
+            "dataset_id": dataset_id,
+            "estimator": estimator,
+            "signals": {},
+            "config": TORQUE_CHANNELS | air | config,
+        }
+    else:
+        body = run_body(dataset_id, estimator, **config)
     service = RunService(db, Settings(database_url=db.url), executor=None)
     with db.write() as s:
-        return service.store_in(s, RunRequest(**run_body(dataset_id, **config))).id
+        return service.store_in(s, RunRequest(**body)).id
 
 
 def workbench(
-    directory: Path, rows: int, channels: int, config: dict[str, Any] | None = None
+    directory: Path,
+    rows: int,
+    channels: int,
+    config: dict[str, Any] | None = None,
+    estimator: str = "skf",
 ) -> Workbench:
-    """The database (SQLite) and store under ``directory``, with both runs queued (with
-    the run config ``config``, e.g. ``{"gates": [...]}``)."""
+    """The database (SQLite) and store under ``directory``, with both runs of ``estimator``
+    queued (with the run config ``config``, e.g. ``{"gates": [...]}``)."""
     config = config or {}
     database_url = f"sqlite:///{directory / 'mapwise.db'}"
     store_url = (directory / "store").as_uri()
@@ -164,8 +182,8 @@ def workbench(
         return Workbench(
             database_url,
             store_url,
-            _add_run(db, warm, config),
-            _add_run(db, measured, config),
+            _add_run(db, warm, estimator, config),
+            _add_run(db, measured, estimator, config),
             log_bytes,
         )
     finally:
@@ -201,14 +219,21 @@ def main() -> None:
     parser.add_argument(
         "--gate", action="store_true", help="with a range gate on u2 (<= 60 mg/stroke)"
     )
+    parser.add_argument(
+        "--estimator",
+        default="skf",
+        choices=["skf", *TORQUE_ESTIMATORS],
+        help="skf on the 4×4 map, or a torque estimator (speed u1, load y, air u2)",
+    )
     args = parser.parse_args()
     config = {"gates": [RANGE_GATE]} if args.gate else {}
     with tempfile.TemporaryDirectory(prefix="mapwise-run-memory-") as tmp:
-        bench = workbench(Path(tmp), args.rows, args.channels, config)
+        bench = workbench(Path(tmp), args.rows, args.channels, config, args.estimator)
         peak = worker_peak(bench, args.code.resolve())
     print(
         f"{args.rows} rows × {args.channels} channels ({bench.log_bytes / MIB:.0f} MiB as "
-        f"float64), skf on {', '.join(USED)}{' gated' if args.gate else ''}: run {peak.status}, "
+        f"float64), {args.estimator} on {', '.join(USED)}{' gated' if args.gate else ''}: run "
+        f"{peak.status}, "
         "worker RSS "
         f"{peak.before_bytes / MIB:.0f} MiB before the run, peak {peak.peak_bytes / MIB:.0f} "
         f"MiB: +{peak.growth_bytes / MIB:.0f} MiB"

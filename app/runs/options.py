@@ -14,7 +14,7 @@ from app.domain import Dataset
 from app.errors import InvalidRequestError
 from app.io.errors import InputError
 from app.io.resample import Raster, parse_raster
-from estimation.registry import EstimatorKind, EstimatorSpec
+from estimation.registry import EstimatorSpec
 
 MAX_VERSIONS = 1000  # persisted versions per run (each carries the map and estimator state)
 MIN_PACE = 0.01  # slowest replay, × real time: a slower one holds a worker for ages
@@ -32,12 +32,11 @@ class RunOptions:
 def streams_input(spec: EstimatorSpec, dataset: Dataset) -> bool:
     """Whether a run reads its log a window at a time from the store, never whole
     (`docs/data-formats.md#streamed-runs`): when nothing in it needs the whole log — a map
-    filter (:meth:`~estimation.filters.estimator.TableFilter.run_windows`) on a dense
-    uploaded dataset (no truth to score, nothing to resample). Its sample gates are scanned
-    a window at a time too (:func:`app.runs.gates.scan_gates`)."""
-    return (
-        spec.kind == EstimatorKind.MAP_FILTER and dataset.scenario is None and not dataset.recorded
-    )
+    filter or a torque estimator (:attr:`~estimation.registry.EstimatorSpec.streams`,
+    :meth:`~estimation.estimator.ChunkedEstimator.run_windows`) on a dense uploaded dataset
+    (no truth to score, nothing to resample). Its sample gates are scanned a window at a
+    time too (:func:`app.runs.gates.scan_gates`)."""
+    return spec.streams and dataset.scenario is None and not dataset.recorded
 
 
 def run_raster(config: dict[str, Any]) -> Raster | None:

@@ -36,7 +36,6 @@ from app.runs.gates import GateResult, cell_counts, nearest_cell
 from app.store.log_rows import LogRows, MemoryRows
 from estimation.errors import EstimationError
 from estimation.estimator import Estimator, Snapshot
-from estimation.holdout import holdout_error_windows
 from estimation.metrics import running_ise, score_run, torque_window
 from estimation.registry import EstimatorSpec
 from estimation.signals import Signals
@@ -404,10 +403,11 @@ class RunResults:
         accept = None if self.gates is None else self.gates.accept
         config = self.run.estimator_config
         try:
-            if self.streamed:  # a map filter's check, the log read a window at a time
+            if self.streamed:  # the check reads the log a window at a time too
                 output = config.get("output", "")
                 unit = config.get("output_unit") or self.log.units.get(output, "")
-                result = holdout_error_windows(
+                check_windows = self.spec.holdout_check_windows()
+                result = check_windows(
                     self.spec.name,
                     config,
                     self.log.rows,

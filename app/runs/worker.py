@@ -37,8 +37,7 @@ from app.runs.options import run_options, run_raster, streams_input
 from app.runs.results import RunResults, channels_read
 from app.store import load_on_raster, open_store
 from app.store.log_rows import open_rows
-from estimation.estimator import Snapshot
-from estimation.filters.estimator import TableFilter
+from estimation.estimator import ChunkedEstimator, Snapshot
 from estimation.registry import get_spec, load_state
 
 __all__ = ["RunSession", "WorkerContext", "database", "execute_run"]
@@ -239,13 +238,14 @@ class RunSession:
 
     def _snapshots(self, results: RunResults) -> Iterator[Snapshot]:
         """The estimator's run: over the log held whole, or a window at a time from the
-        store (:meth:`TableFilter.run_windows`, the same snapshots)."""
+        store (:meth:`ChunkedEstimator.run_windows`, the same snapshots)."""
         every = self._chunk_size()
         if not results.streamed:
             return self.estimator.run(
                 results.signals, every=every, state=self.state, accept=self.accept
             )
-        assert isinstance(self.estimator, TableFilter)
+        assert isinstance(self.estimator, ChunkedEstimator)
+        assert self.estimator.windowed
         log = results.log
         return self.estimator.run_windows(
             log.rows,

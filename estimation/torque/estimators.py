@@ -27,7 +27,7 @@ from estimation import kernels
 from estimation.errors import ConfigError, ShapeError, StateError
 from estimation.estimator import ChunkedEstimator, WindowPlan
 from estimation.registry import Cost, EstimatorKind, EstimatorSpec, family
-from estimation.signals import Signals
+from estimation.signals import Signals, uniform_period
 from estimation.state import EstimatorState
 from estimation.torque.config import (
     AIR_UNIT_SCALE,
@@ -238,7 +238,7 @@ class TorqueEstimator(ChunkedEstimator[TorqueState, TorquePrepared]):
         time = timeline()
         if time.size != n:
             raise ConfigError(f"the time column has {time.size} samples, the log {n}")
-        return WindowPlan(steps=n, extra_rows=0, context=Signals(time, {}).sample_period())
+        return WindowPlan(steps=n, extra_rows=0, context=uniform_period(time))
 
     def prepare_window(
         self, signals: Signals, accept: np.ndarray | None, offset: int, n: int, context: float

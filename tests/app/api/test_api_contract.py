@@ -15,9 +15,11 @@ from fastapi.testclient import TestClient
 from app.cli import main as cli_main
 from app.db.migrate import head_revision
 from app.io.csv_files import read_csv
+from app.io.decimate import minmax_decimate
 from app.runs.gates import apply_gates, parse_gates
 from estimation.estimator import WINDOW_STEPS
 from estimation.holdout import holdout_error
+from estimation.registry import get_spec
 from tests.support.helpers import (
     TABLE,
     TRUE_MAP,
@@ -555,3 +557,35 @@ def test_a_gated_streamed_run_equals_the_whole_log_run_with_its_gates(
     metrics = client.get(f"/api/runs/{done['id']}").json()["metrics"]
     assert metrics["holdout:samples"] == holdout["holdout:samples"]
     assert metrics["holdout:rmse"] == pytest.approx(holdout["holdout:rmse"], rel=1e-9)
+
+
+@pytest.mark.slow
+def test_a_streamed_torque_run_stores_the_whole_log_runs_series(
+    client: TestClient, tmp_path: Path
+) -> None:
+    """A torque estimator on an uploaded log of 2.5 windows (docs/data-formats.md#streamed-runs)
+    runs a window at a time from the store; its stored series are the min/max decimation of
+    the whole-log run's outputs, bit for bit, and its truth-free check is reported as not
+    applicable, as on the whole-log path."""
+    n = WINDOW_STEPS * 5 // 2
+    text = log_csv(n, seed=5, rate_hz=100.0)
+    dataset = upload_ok(client, text)
+    channels = {"speed_channel": "u1", "load_channel": "y", "air_channel": "u2"}
+    body = {"dataset_id": dataset["id"], "estimator": "adaptive-tv", "signals": {}}
+    done = wait_run(client, start_run(client, body | {"config": channels})["id"], timeout=300)
+    assert done["status"] == "succeeded", done["error"]
+    path = tmp_path / "log.csv"
+    path.write_text(text)
+    signals = read_csv(path).signals
+    whole = get_spec("adaptive-tv").build(channels).fit(signals).outputs
+    assert all(np.isfinite(v).all() for v in whole.values())
+    stored = minmax_decimate(signals.time, whole, 4000)  # the server's series_points
+    time, expected = minmax_decimate(*stored, 4000)  # and as GET decimates it again
+    got = client.get(f"/api/runs/{done['id']}/series", params={"points": 4000}).json()
+    assert got["time"] == time.tolist()
+    assert set(got["series"]) == set(whole)
+    for name, values in expected.items():
+        assert got["series"][name]["values"] == values.tolist(), name
+    metrics = client.get(f"/api/runs/{done['id']}").json()["metrics"]
+    assert metrics["samples"] == n
+    assert "holdout:not_applicable:unmeasured_input" in metrics
