@@ -27,7 +27,7 @@ from app.reproduce.figures import map_heatmaps, map_surfaces, series_panels
 from app.reproduce.report import Figure, Section, Table, Text, num, pct
 from estimation.errors import EstimationError
 from estimation.metrics import cell_visits
-from estimation.observers.lpv import LpvConfig
+from estimation.observers.lpv_config import LpvConfig
 from estimation.registry import registry
 
 SCENARIOS = ("maf-whtc", "maf-ftp75")

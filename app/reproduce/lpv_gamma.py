@@ -31,7 +31,7 @@ import numpy as np
 from app.reproduce.fidelity import SEGMENTS_S, head, lpv_mre
 from app.reproduce.report import Table, Text, pct
 from app.reproduce.seeds import TUNING_SEEDS
-from estimation.observers.lpv import LpvConfig
+from estimation.observers.lpv_config import LpvConfig
 from estimation.scenarios import get_scenario
 
 SCENARIOS: tuple[str, ...] = tuple(SEGMENTS_S)

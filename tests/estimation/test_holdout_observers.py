@@ -23,7 +23,8 @@ from estimation.innovation import innovation_stats
 from estimation.kernels import ekf as kern
 from estimation.metrics import output_metrics
 from estimation.observers.ekf import EKF_SPECS, ekf_run
-from estimation.observers.lpv import LpvConfig, LpvObserver, lpv_run
+from estimation.observers.lpv import LpvObserver, lpv_run
+from estimation.observers.lpv_config import LpvConfig
 from estimation.registry import HOLDOUT, EstimatorKind, get_spec, names
 from estimation.scenarios import get_scenario
 from estimation.signals import Signals

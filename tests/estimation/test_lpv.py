@@ -11,7 +11,8 @@ from numpy.testing import assert_allclose, assert_array_equal
 from estimation.errors import ConfigError, SignalError
 from estimation.metrics import map_metrics
 from estimation.observers.lmi import box_vertices, synthesize_gain, system_matrices
-from estimation.observers.lpv import LPV_SPECS, LpvConfig, LpvObserver, LpvState, lpv_run
+from estimation.observers.lpv import LPV_SPECS, LpvObserver, LpvState, lpv_run
+from estimation.observers.lpv_config import LpvConfig
 from estimation.observers.lpv_fill import fill_quadratic, fill_smooth, visited_cells
 from estimation.scenarios import ScenarioData, get_scenario
 from estimation.signals import Signals

@@ -14,7 +14,7 @@ from estimation.errors import ConfigError
 from estimation.mismatch import RANGES, MismatchDraw
 from estimation.observers.airpath_model import AirpathModelConfig
 from estimation.observers.ekf_config import EkfAugConfig
-from estimation.observers.lpv import LpvConfig
+from estimation.observers.lpv_config import LpvConfig
 from estimation.plants.airpath_params import AirpathParams
 from estimation.plants.airpath_sensors import NoiseSpec
 from estimation.plants.nox import DEFAULT_NOX_PARAMS

@@ -21,7 +21,7 @@ from app.reproduce import SECTION_KEYS, lpv_gamma
 from app.reproduce.fidelity import head, lpv_mre
 from app.reproduce.report import num, pct
 from app.reproduce.sensitivity import GRID, GammaSweep, paper_gamma_run, sweep, table
-from estimation.observers.lpv import LpvConfig
+from estimation.observers.lpv_config import LpvConfig
 from estimation.scenarios import get_scenario
 from estimation.torque.config import AdaptiveTvConfig
 
