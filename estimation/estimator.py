@@ -83,12 +83,15 @@ WINDOW_STEPS = 1 << 18
 @dataclass(frozen=True, slots=True)
 class WindowPlan:
     """How :meth:`ChunkedEstimator.run_windows` reads a log: ``steps`` kernel steps in all,
-    each window with ``extra_rows`` rows after its last step (a sensor delay's), and the
-    whole-log ``context`` each window is prepared with (resolved settings, sample period)."""
+    each window with ``extra_rows`` rows after its last step (a sensor delay's) and
+    ``rows_before`` before its first (a backward difference's, where the log has them), and
+    the whole-log ``context`` each window is prepared with (resolved settings, sample period,
+    a gain design)."""
 
     steps: int
     extra_rows: int
     context: Any
+    rows_before: int = 0
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -235,17 +238,25 @@ class ChunkedEstimator(ABC, Generic[S, P]):
             state, outputs, status = self.advance(state, prepared, min(start + chunk, steps))
             yield self.snapshot(state, prepared, start, outputs, status)
 
-    def plan_windows(self, n: int, timeline: Callable[[], np.ndarray]) -> WindowPlan:
+    def plan_windows(
+        self,
+        n: int,
+        timeline: Callable[[], np.ndarray],
+        read: Callable[[int, int], Signals],
+        accept: np.ndarray | None,
+    ) -> WindowPlan:
         """The :class:`WindowPlan` of a log of ``n`` samples whose time column ``timeline()``
-        gives (read only if the plan needs it). An estimator that sets ``windowed`` says how;
-        one that needs more of the whole log than its time column cannot."""
+        gives (read only if the plan needs it); ``read`` and ``accept`` are
+        :meth:`run_windows`'s, for a plan that takes more of the whole log than its time
+        column (a pass a window at a time). An estimator that sets ``windowed`` says how."""
         raise NotImplementedError(f"{self.name} reads its log whole")
 
     def prepare_window(
         self, signals: Signals, accept: np.ndarray | None, offset: int, n: int, context: Any
     ) -> P:
-        """:meth:`prepare` for rows ``offset …`` (``signals``) of a log of ``n`` samples, with
-        the plan's ``context``; ``accept`` is the mask of those rows."""
+        """:meth:`prepare` for rows ``offset …`` of a log of ``n`` samples, with the plan's
+        ``context``: ``signals`` start ``min(rows_before, offset)`` rows earlier, and
+        ``accept`` is the mask of its rows."""
         raise NotImplementedError(f"{self.name} reads its log whole")
 
     def run_windows(
@@ -277,14 +288,14 @@ class ChunkedEstimator(ABC, Generic[S, P]):
             raise ConfigError(f"every must be >= 1 sample, got {every}")
         if accept is not None and np.shape(accept) != (n,):
             raise ShapeError(f"accept mask has shape {np.shape(accept)}, the log has {n} samples")
-        plan = self.plan_windows(n, timeline or (lambda: read(0, n).time))
+        plan = self.plan_windows(n, timeline or (lambda: read(0, n).time), read, accept)
         steps = plan.steps
         span = max(1, -(-window // chunk)) * chunk
 
         def prepared(a: int, z: int) -> tuple[Signals, P]:
-            end = min(z + plan.extra_rows, n)
-            mask = None if accept is None else accept[a:end]
-            rows = read(a, end)
+            first, end = max(a - plan.rows_before, 0), min(z + plan.extra_rows, n)
+            mask = None if accept is None else accept[first:end]
+            rows = read(first, end)
             return rows, self.prepare_window(rows, mask, a, n, plan.context)
 
         if state is None:
@@ -297,6 +308,8 @@ class ChunkedEstimator(ABC, Generic[S, P]):
         while state.step < steps:
             part = prepared(state.step, min(state.step + span, steps))[1]
             end = self.steps(part)
+            if end <= state.step:  # a plan and a window that disagree would loop forever
+                raise RuntimeError(f"{self.name}: the window at step {state.step} ends at {end}")
             while state.step < end:
                 start = state.step
                 state, outputs, status = self.advance(state, part, min(start + chunk, end))

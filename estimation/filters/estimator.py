@@ -153,7 +153,13 @@ class TableFilter(ChunkedEstimator[FilterState, Prepared]):
         period = signals.sample_period() if needs_period else None
         return resolve_settings(self.config, self.grid, sample_period_s=period)
 
-    def plan_windows(self, n: int, timeline: Callable[[], np.ndarray]) -> WindowPlan:
+    def plan_windows(
+        self,
+        n: int,
+        timeline: Callable[[], np.ndarray],
+        read: Callable[[int, int], Signals],
+        accept: np.ndarray | None,
+    ) -> WindowPlan:
         """A window of :meth:`run_windows` reads the τ rows after its last step, which its
         last measurements need (sensor delay); a delay in seconds is resolved, as by
         :meth:`run`, on the whole log's sample period (``timeline()``)."""

@@ -42,15 +42,15 @@ difference); ``"zero"`` sets ``E3 = 0`` and leaves it to the ω_t output injecti
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
-from typing import Any, ClassVar, Literal
+from collections.abc import Callable
+from typing import Any, Literal
 
 import numpy as np
 from pydantic import BaseModel
 
 from estimation import kernels
 from estimation.errors import ConfigError, ShapeError
-from estimation.estimator import Chunk, ChunkedEstimator
+from estimation.estimator import WINDOW_STEPS, Chunk, ChunkedEstimator, WindowPlan
 from estimation.observers.airpath_model import model_rho
 from estimation.observers.lmi import (
     DEFAULT_OUTPUT_SCALE,
@@ -59,9 +59,9 @@ from estimation.observers.lmi import (
     synthesize_gain,
 )
 from estimation.observers.lpv_config import LpvConfig
+from estimation.observers.lpv_state import LpvBox, LpvPrepared, LpvState
 from estimation.registry import Cost, EstimatorKind, EstimatorSpec
 from estimation.signals import Signals
-from estimation.state import EstimatorState
 from estimation.table import Axis, Grid, Table
 
 RHO_CHANNELS = ("rho1", "rho2", "rho3", "rho4", "rho5")
@@ -82,61 +82,13 @@ def _mode_code(adaptation: str) -> int:
     return codes[adaptation]
 
 
-@dataclass(frozen=True, slots=True, eq=False)
-class LpvState(EstimatorState):
-    """Observer state: step, x̂ (3,) [Pa, Pa, rad/s], θ̂ (p,) [kg/s], the accumulated ψ
-    weights (visits) and excitation ``S_j = ∫ψ_j² dt`` [s] (the normalised gain) of every
-    element, and the design it runs.
-
-    The gain and the ρ box are part of the state so a resumed run uses exactly the design
-    of the interrupted one.
-    """
-
-    a1: float
-    a2: float
-    x_hat: np.ndarray
-    theta: np.ndarray
-    weight_sum: np.ndarray
-    excitation: np.ndarray
-    L_scaled: np.ndarray
-    state_scale: np.ndarray
-    output_scale: np.ndarray
-    rho_lo: np.ndarray
-    rho_hi: np.ndarray
-
-    ARRAYS: ClassVar[tuple[str, ...]] = (
-        "x_hat",
-        "theta",
-        "weight_sum",
-        "excitation",
-        "L_scaled",
-        "state_scale",
-        "output_scale",
-        "rho_lo",
-        "rho_hi",
-    )
-    WHAT: ClassVar[str] = "LPV observer state"
-
-
-@dataclass(frozen=True, slots=True, eq=False)
-class LpvPrepared:
-    """A log turned into kernel inputs."""
-
-    idx: np.ndarray
-    w: np.ndarray
-    y: np.ndarray  # (n, 3) p_im, ω_t, W_c,meas
-    rho: np.ndarray  # (n, 5)
-    e: np.ndarray  # (n, 3) E of LPV (3)
-    h: np.ndarray  # (n,) step to each sample, h[0] = 0
-    accept: np.ndarray
-    time_s: np.ndarray
-    x0: np.ndarray
-
-
 def data_rho_box(rho: np.ndarray, *, rho4_floor: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
     """The ρ box of a log: per-channel min/max, the ρ4 minimum raised to ``rho4_floor·max``."""
-    lo = rho.min(axis=0).astype(np.float64)
-    hi = rho.max(axis=0).astype(np.float64)
+    return _floored(rho.min(axis=0), rho.max(axis=0), rho4_floor)
+
+
+def _floored(lo: np.ndarray, hi: np.ndarray, rho4_floor: float) -> tuple[np.ndarray, np.ndarray]:
+    lo, hi = lo.astype(np.float64), hi.astype(np.float64)
     lo[3] = max(lo[3], rho4_floor * hi[3])
     return lo, hi
 
@@ -148,6 +100,7 @@ class LpvObserver(ChunkedEstimator[LpvState, LpvPrepared]):
 
     name = "lpv"
     state_class = LpvState
+    windowed = True
 
     def __init__(self, config: LpvConfig) -> None:
         self.config = config
@@ -194,6 +147,11 @@ class LpvObserver(ChunkedEstimator[LpvState, LpvPrepared]):
         with ``rho1="rho1_compressor"``, the compressor map; ``"channels"``: the log's ρ
         channels and its ``t_em`` channel (700 K without one).
         """
+        rho, t_em = self._scheduling_rows(signals)
+        return rho, 700.0 if t_em is None else float(np.mean(t_em))
+
+    def _scheduling_rows(self, signals: Signals) -> tuple[np.ndarray, np.ndarray | None]:
+        """ρ (n, 5) and the exhaust temperature [K] of every sample (``None``: no channel)."""
         c = self.config
         if c.rho_source == "model":
             signals.require(self._model_columns())
@@ -201,13 +159,70 @@ class LpvObserver(ChunkedEstimator[LpvState, LpvPrepared]):
             rho, rho1_compressor, t_em = model_rho(cols, signals.time, c.model)
             if c.rho1 == "rho1_compressor":
                 rho[:, 0] = rho1_compressor
-            return np.ascontiguousarray(rho), float(np.mean(t_em))
+            return np.ascontiguousarray(rho), t_em
         signals.require(self.rho_channels())
         rho = np.ascontiguousarray(signals.stack(self.rho_channels()))
-        t_em = float(np.mean(signals[c.t_em])) if c.t_em and c.t_em in signals else 700.0
-        return rho, t_em
+        return rho, (signals[c.t_em] if c.t_em and c.t_em in signals else None)
+
+    def plan_windows(
+        self,
+        n: int,
+        timeline: Callable[[], np.ndarray],
+        read: Callable[[int, int], Signals],
+        accept: np.ndarray | None,
+    ) -> WindowPlan:
+        """A pass over the log a window at a time for what :meth:`prepare` takes from all of
+        it (:class:`LpvBox`: 8 bytes a sample for the mean T_em, as ``np.mean`` sums it, and
+        the accept mask); each window reads the row before it, for ``ṗ_im``, ``h`` and
+        ``Δω_t``."""
+        lo, hi = np.full(5, np.inf), np.full(5, -np.inf)
+        t_em: np.ndarray | None = np.empty(n)
+        mask = np.ones(n, dtype=np.bool_) if accept is None else np.array(accept, dtype=bool)
+        for a in range(0, n, WINDOW_STEPS):
+            lead = min(a, 1)
+            rows = read(a - lead, min(a + WINDOW_STEPS, n))
+            rows.require(self.required_signals())
+            rho, temperature = self._scheduling_rows(rows)
+            rho = rho[lead:]
+            lo, hi = np.minimum(lo, rho.min(axis=0)), np.maximum(hi, rho.max(axis=0))
+            if self.config.adapt_only_with_flow:
+                mask[a : a + rho.shape[0]] &= rho[:, 0] > 0.0
+            if temperature is None:
+                t_em = None
+            elif t_em is not None:
+                t_em[a : a + rho.shape[0]] = temperature[lead:]
+        mean = 700.0 if t_em is None else float(np.mean(t_em))
+        return WindowPlan(steps=n, extra_rows=0, context=LpvBox(lo, hi, mean, mask), rows_before=1)
+
+    def prepare_window(
+        self, signals: Signals, accept: np.ndarray | None, offset: int, n: int, context: LpvBox
+    ) -> LpvPrepared:
+        lead = min(offset, 1)
+        whole = self._prepared(signals, accept, context.t_em_k)
+        keep = slice(lead, None)
+        return dataclasses.replace(
+            whole,
+            idx=whole.idx[keep],
+            w=whole.w[keep],
+            y=whole.y[keep],
+            rho=whole.rho[keep],
+            e=whole.e[keep],
+            h=whole.h[keep],
+            accept=whole.accept[keep],
+            time_s=whole.time_s[keep],
+            offset=offset,
+            total=n,
+            rejected_before=int(np.count_nonzero(~context.accept[:offset])),
+            box=context,
+        )
 
     def prepare(self, signals: Signals, accept: np.ndarray | None = None) -> LpvPrepared:
+        return self._prepared(signals, accept, None)
+
+    def _prepared(
+        self, signals: Signals, accept: np.ndarray | None, t_em_k: float | None
+    ) -> LpvPrepared:
+        """Kernel inputs of ``signals``; ``a2`` at ``t_em_k`` (``None``: these rows' mean)."""
         c = self.config
         signals.require(self.required_signals())
         n = len(signals)
@@ -216,6 +231,8 @@ class LpvObserver(ChunkedEstimator[LpvState, LpvPrepared]):
             raise ShapeError(f"accept mask has shape {mask.shape}, the log has {n} samples")
         idx, w = self.grid.regressor(signals.stack([a.name for a in c.axes]))
         rho, t_em = self.scheduling(signals)
+        if t_em_k is not None:
+            t_em = t_em_k
         if c.adapt_only_with_flow:
             mask = mask & (rho[:, 0] > 0.0)
         omega = signals[c.omega_t]
@@ -241,12 +258,16 @@ class LpvObserver(ChunkedEstimator[LpvState, LpvPrepared]):
 
     def design_gain(self, signals: Signals) -> GainDesign:
         """Solve the LMIs on the configured ρ box, or the log's (:func:`data_rho_box`)."""
-        c = self.config
         rho, t_em = self.scheduling(signals)
+        return self._design(rho.min(axis=0), rho.max(axis=0), t_em)
+
+    def _design(self, rho_min: np.ndarray, rho_max: np.ndarray, t_em: float) -> GainDesign:
+        """The LMI gain on the configured ρ box, or on the log's ``rho_min … rho_max``."""
+        c = self.config
         if c.rho_min is not None and c.rho_max is not None:
             lo, hi = np.array(c.rho_min), np.array(c.rho_max)
         else:
-            lo, hi = data_rho_box(rho, rho4_floor=c.rho4_floor)
+            lo, hi = _floored(rho_min, rho_max, c.rho4_floor)
         return synthesize_gain(
             lo,
             hi,
@@ -258,7 +279,11 @@ class LpvObserver(ChunkedEstimator[LpvState, LpvPrepared]):
         )
 
     def initial_state(self, signals: Signals, prepared: LpvPrepared) -> LpvState:
-        design = self.design_gain(signals)
+        box = prepared.box
+        if box is None:
+            design = self.design_gain(signals)
+        else:
+            design = self._design(box.rho_min, box.rho_max, box.t_em_k)
         self.design = design
         lo, hi = design.vertices.min(axis=0), design.vertices.max(axis=0)
         return LpvState(
@@ -278,7 +303,7 @@ class LpvObserver(ChunkedEstimator[LpvState, LpvPrepared]):
         )
 
     def steps(self, prepared: LpvPrepared) -> int:
-        return int(prepared.y.shape[0])
+        return prepared.offset + int(prepared.y.shape[0])
 
     def start(self, signals: Signals, prepared: LpvPrepared) -> LpvState:
         return self.initial_state(signals, prepared)
@@ -301,22 +326,30 @@ class LpvObserver(ChunkedEstimator[LpvState, LpvPrepared]):
             "omega_t_rad_s": x_out[:, 2],
             "w_c_kg_s": wc,
             "maf_error_kg_s": dwc,
-            "residual": prepared.y[start:stop, 2] - wc - dwc,
+            "residual": prepared.y[start - prepared.offset : stop - prepared.offset, 2] - wc - dwc,
         }
-        status = np.where(prepared.accept[start:stop], 0, 1).astype(np.int8)
+        accepted = prepared.accept[start - prepared.offset : stop - prepared.offset]
+        status = np.where(accepted, 0, 1).astype(np.int8)
         return state, outputs, status
 
     def times(self, prepared: LpvPrepared) -> np.ndarray:
         return prepared.time_s
 
+    def n_samples(self, prepared: LpvPrepared) -> int:
+        return prepared.total or int(prepared.time_s.size)
+
+    def time_of(self, prepared: LpvPrepared, sample: int) -> float:
+        return float(prepared.time_s[max(sample - 1, 0) - prepared.offset])
+
     def report(self, state: LpvState, prepared: LpvPrepared, chunk: Chunk) -> dict[str, Any]:
         table = Table(self.grid.axes, state.theta.reshape(self.grid.shape))
-        if chunk.sample >= prepared.time_s.size:
+        if chunk.sample >= self.n_samples(prepared):
             table = self.filled(table, state)
+        masked = np.count_nonzero(~prepared.accept[: chunk.sample - prepared.offset])
         return {
             "table": table,
             "outputs": chunk.outputs,
-            "rejected": {"mask": int(np.count_nonzero(~prepared.accept[: chunk.sample]))},
+            "rejected": {"mask": prepared.rejected_before + int(masked)},
         }
 
     def filled(self, table: Table, state: LpvState) -> Table:
@@ -362,7 +395,7 @@ def lpv_run(
     x_out = np.empty((m, 3))
     wc = np.empty(m)
     dwc = np.empty(m)
-    sl = slice(start, stop)
+    sl = slice(start - prepared.offset, stop - prepared.offset)
     kernels.lpv.lpv_observer_kernel(
         out.x_hat, out.theta, out.weight_sum, out.excitation,
         prepared.idx[sl], prepared.w[sl], prepared.y[sl], prepared.rho[sl], prepared.e[sl],

@@ -233,7 +233,13 @@ class TorqueEstimator(ChunkedEstimator[TorqueState, TorquePrepared]):
     def prepare(self, signals: Signals, accept: np.ndarray | None = None) -> TorquePrepared:
         return self._prepared(signals, accept, signals.sample_period())
 
-    def plan_windows(self, n: int, timeline: Callable[[], np.ndarray]) -> WindowPlan:
+    def plan_windows(
+        self,
+        n: int,
+        timeline: Callable[[], np.ndarray],
+        read: Callable[[int, int], Signals],
+        accept: np.ndarray | None,
+    ) -> WindowPlan:
         """Every window is prepared with the whole log's sample period (``timeline()``)."""
         time = timeline()
         if time.size != n:

@@ -3,8 +3,8 @@
 :meth:`ChunkedEstimator.run_windows` reads the log through ``read(a, z)`` (here: slices of
 the same log, each read recorded) and must yield the snapshots of ``run`` — samples, times,
 outputs, status codes, maps, variances, states — for every map filter, with and without a
-sensor delay, and every torque estimator, from the start and resumed, and never read more
-than a window plus the delay's rows at once.
+sensor delay, every torque law and the LPV observer, from the start and resumed, and never
+read more than a window plus the delay's rows (or the row before it) at once.
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ from estimation.errors import ConfigError, ShapeError, SignalError
 from estimation.estimator import Snapshot
 from estimation.filters.estimator import TableFilter
 from estimation.registry import get_spec
+from estimation.scenarios import get_scenario
 from estimation.signals import Signals
 from estimation.torque import TorqueEstimator
 from tests.estimation.test_torque_estimators import NAMES as TORQUE_KINDS
@@ -242,3 +243,47 @@ def test_a_torque_window_refuses_what_the_whole_run_refuses() -> None:
         list(estimator.run_windows(Reader(signals), N, every=100, accept=reject))
     with pytest.raises(ConfigError, match="time column has 10 samples"):
         next(estimator.run_windows(Reader(signals), N, every=100, timeline=lambda: uneven[:10]))
+
+
+def _lpv_case(source: str) -> tuple[Signals, dict]:
+    """40 s of the WHTC air path (0.1 s samples): ρ from the log's channels with the plant's
+    own model (``mismatch="none"``), or computed by the observer's drawn model."""
+    mismatch = "none" if source == "channels" else "nominal"
+    scenario = get_scenario("maf-whtc")
+    data = scenario.build(seed=3, duration_s=40.0, mismatch=mismatch)
+    config = {**scenario.default_config("lpv", data), "fill": "quadratic"}
+    assert config.get("rho_source", "channels") == source
+    return data.signals, config
+
+
+@pytest.mark.parametrize("source", ["channels", "model"])
+def test_the_lpv_observer_in_windows_is_its_whole_log_run(source: str) -> None:
+    """The plan's pass gives each window the whole log's ρ box, mean T_em and mask count;
+    each window reads the row before it (ṗ_im, h, Δω_t). Snapshots, the filled final map and
+    states are the whole run's bit for bit, with an accept mask, and resumed."""
+    signals, config = _lpv_case(source)
+    n = len(signals)
+    accept = np.ones(n, dtype=bool)
+    accept[120:160] = False
+    whole = list(get_spec("lpv").build(config).run(signals, every=37, accept=accept))
+    read = Reader(signals)
+    windowed = list(
+        get_spec("lpv").build(config).run_windows(read, n, every=37, window=100, accept=accept)
+    )
+    assert len(windowed) == len(whole) > n // 100
+    for a, b in zip(whole, windowed, strict=True):
+        _same(a, b)
+    assert whole[-1].rejected["mask"] >= 40
+    assert max(z - a for a, z in read.calls if z - a < n) <= 112  # 3 chunks and the row before
+    middle = whole[len(whole) // 2].state
+    resumed = list(
+        get_spec("lpv").build(config).run(signals, every=50, state=middle, accept=accept)
+    )
+    again = list(
+        get_spec("lpv")
+        .build(config)
+        .run_windows(Reader(signals), n, every=50, state=middle, window=120, accept=accept)
+    )
+    assert len(again) == len(resumed)
+    for a, b in zip(resumed, again, strict=True):
+        _same(a, b)
