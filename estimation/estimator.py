@@ -244,11 +244,13 @@ class ChunkedEstimator(ABC, Generic[S, P]):
         timeline: Callable[[], np.ndarray],
         read: Callable[[int, int], Signals],
         accept: np.ndarray | None,
+        window: int = WINDOW_STEPS,
     ) -> WindowPlan:
         """The :class:`WindowPlan` of a log of ``n`` samples whose time column ``timeline()``
         gives (read only if the plan needs it); ``read`` and ``accept`` are
         :meth:`run_windows`'s, for a plan that takes more of the whole log than its time
-        column (a pass a window at a time). An estimator that sets ``windowed`` says how."""
+        column (a pass ``window`` rows at a time). An estimator that sets ``windowed`` says
+        how."""
         raise NotImplementedError(f"{self.name} reads its log whole")
 
     def prepare_window(
@@ -288,7 +290,7 @@ class ChunkedEstimator(ABC, Generic[S, P]):
             raise ConfigError(f"every must be >= 1 sample, got {every}")
         if accept is not None and np.shape(accept) != (n,):
             raise ShapeError(f"accept mask has shape {np.shape(accept)}, the log has {n} samples")
-        plan = self.plan_windows(n, timeline or (lambda: read(0, n).time), read, accept)
+        plan = self.plan_windows(n, timeline or (lambda: read(0, n).time), read, accept, window)
         steps = plan.steps
         span = max(1, -(-window // chunk)) * chunk
 

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -37,6 +38,7 @@ import numpy as np
 from pydantic import BaseModel
 
 from estimation.errors import ConfigError
+from estimation.estimator import WINDOW_STEPS
 from estimation.holdout import DEFAULT_FIT_FRACTION, NotApplicable, split_point
 from estimation.innovation import (
     InnovationStats,
@@ -129,8 +131,8 @@ class ObserverHoldout:
         }
 
 
-def _split(signals: Signals, fraction: float, accept: np.ndarray | None) -> tuple[int, np.ndarray]:
-    n = len(signals)
+def _split(n: int, fraction: float, accept: np.ndarray | None) -> tuple[int, np.ndarray]:
+    """The first held-out sample of a log of ``n`` samples and its accept mask (all: ``None``)."""
     m = split_point(n, fraction)
     if m < 2 or n - m < 1:
         raise ConfigError(f"a log of {n} samples is too short to fit on {m} and predict the rest")
@@ -156,7 +158,7 @@ def lpv_holdout(
     obs = get_spec(estimator).build(config)
     if not isinstance(obs, LpvObserver):
         raise ConfigError(f"{estimator!r} is not the LPV observer")
-    m, mask = _split(signals, fraction, accept)
+    m, mask = _split(len(signals), fraction, accept)
     n = len(signals)
     c = obs.config
     fit_signals = signals.slice(0, m)
@@ -190,17 +192,95 @@ def lpv_predict(
     c = obs.config
     m, n = state.step, len(signals)
     prep = obs.prepare(signals, accept)
-    e = prep.e.copy()
-    e[:, 1] = state.a2 * signals[c.fuel_flow]
-    frozen = dataclasses.replace(prep, e=e, accept=np.zeros(n, dtype=np.bool_))
-    L = state.L_scaled.copy()
-    L[:, 2] = 0.0  # the MAF reading feeds nothing
+    frozen = _frozen(prep, state, signals[c.fuel_flow])
     out = []
-    for theta in (state.theta, np.zeros_like(state.theta)):
-        start = dataclasses.replace(state, L_scaled=L, theta=theta.copy())
+    for start in _frozen_states(state):
         _, _, wc, dwc = lpv_run(start, frozen, m, n, gamma=c.gamma, adaptation=c.adaptation)
         out.append(wc + dwc)
     return out[0], out[1], prep
+
+
+def _frozen(prepared: LpvPrepared, state: LpvState, fuel_flow: np.ndarray) -> LpvPrepared:
+    """``prepared`` for a prediction from ``state``: every sample rejected (no adaptation) and
+    ``E2 = a2 W_f`` with the fitted ``a2``."""
+    e = prepared.e.copy()
+    e[:, 1] = state.a2 * fuel_flow
+    return dataclasses.replace(prepared, e=e, accept=np.zeros_like(prepared.accept))
+
+
+def _frozen_states(state: LpvState) -> tuple[LpvState, LpvState]:
+    """The adapted and the base (``θ̂ = 0``) observer a prediction runs from ``state``, with
+    the MAF column of ``L`` set to zero so the MAF reading feeds nothing."""
+    L = state.L_scaled.copy()
+    L[:, 2] = 0.0
+    return (
+        dataclasses.replace(state, L_scaled=L, theta=state.theta.copy()),
+        dataclasses.replace(state, L_scaled=L.copy(), theta=np.zeros_like(state.theta)),
+    )
+
+
+def lpv_holdout_windows(
+    estimator: str,
+    config: BaseModel | dict[str, Any],
+    read: Callable[[int, int], Signals],
+    n: int,
+    *,
+    unit: str = "kg/s",
+    fraction: float = DEFAULT_FIT_FRACTION,
+    window: int = WINDOW_STEPS,
+    timeline: Callable[[], np.ndarray] | None = None,
+    accept: np.ndarray | None = None,
+) -> ObserverHoldout:
+    """:func:`lpv_holdout` of a log of ``n`` samples that is never held whole: ``read(a, z)``
+    gives its rows ``a … z−1``, read ``window`` at a time (and the row before, for the
+    backward differences). The fit is :meth:`~estimation.estimator.ChunkedEstimator.run_windows`
+    over the first ``m`` rows, whose plan designs the gain on their ρ box as the whole-log fit
+    does; the prediction carries the two frozen observers across the windows of the rest.
+    The fit's output error and accept mask (about 35 bytes a fit sample while its
+    statistics are taken) and then the scored prediction errors (16 bytes a held-out sample)
+    are kept, so the metrics are :func:`lpv_holdout`'s bit for bit
+    (``tests/estimation/test_holdout_observers.py``). ``unit`` and ``timeline`` are the
+    common signature of :data:`estimation.registry.HOLDOUT_WINDOWS`'s functions: the MAF
+    error is in kg/s and the observer reads its own time column."""
+    obs = get_spec(estimator).build(config)
+    if not isinstance(obs, LpvObserver):
+        raise ConfigError(f"{estimator!r} is not the LPV observer")
+    m, mask = _split(n, fraction, accept)
+    c = obs.config
+    residual, fit_accept = np.empty(m), np.empty(m, dtype=np.bool_)
+    state: LpvState | None = None
+    for snap in obs.run_windows(read, m, every=window, window=window, accept=mask[:m]):
+        part = slice(snap.chunk_start, snap.sample)
+        residual[part] = snap.outputs["residual"]
+        fit_accept[part] = snap.status == 0
+        state = snap.state
+    assert state is not None
+    residual_stats = output_error_stats(residual, fit_accept)
+    del residual, fit_accept  # held no longer than the fit's statistics need them
+    observers = list(_frozen_states(state))
+    errors: list[list[np.ndarray]] = [[], []]  # the adapted and the base map's, scored
+    for a in range(m, n, window):
+        z = min(a + window, n)
+        rows = read(a - 1, z)  # the row before: the backward differences of sample a
+        prep = obs.prepare(rows, mask[a - 1 : z])
+        frozen = dataclasses.replace(_frozen(prep, state, rows[c.fuel_flow]), offset=a - 1)
+        y, scored = rows[c.maf][1:], prep.accept[1:]
+        for i, observer in enumerate(observers):
+            gains = {"gamma": c.gamma, "adaptation": c.adaptation}
+            observers[i], _, wc, dwc = lpv_run(observer, frozen, a, z, **gains)
+            errors[i].append((y - (wc + dwc))[scored])
+    adapted, base = np.concatenate(errors[0]), np.concatenate(errors[1])
+    return ObserverHoldout(
+        unit=unit,
+        fraction=fraction,
+        fit_samples=m,
+        holdout_samples=n - m,
+        scored=int(adapted.size),
+        adapted=output_metrics(adapted),
+        base=output_metrics(base),
+        residual=residual_stats,
+        not_applicable=NO_COVARIANCE,
+    )
 
 
 # -- EKF --------------------------------------------------------------------------------------
@@ -255,7 +335,7 @@ def ekf_holdout(
     obs = get_spec(estimator).build(config)
     if not isinstance(obs, EkfObserver):
         raise ConfigError(f"{estimator!r} is not an EKF")
-    m, mask = _split(signals, fraction, accept)
+    m, mask = _split(len(signals), fraction, accept)
     n = len(signals)
     settings = obs.settings
     model = obs.prepare(signals, mask)  # sample k reads only samples ≤ k

@@ -82,6 +82,10 @@ class Cost:
     (docs/tuning.md#which-runs-report-what): 1, a refit on the first 70 % of the log and a
     prediction of the rest, made while the run's own data are still held; 0 for an estimator
     without one (the torque estimators)."""
+    stream_sample_bytes: float = 0.0
+    """Bytes a sample of the whole log that a streamed run's truth-free check keeps beyond
+    the run's own (docs/reliability.md#admission): the LPV check's fit output error,
+    its mask and the scored prediction errors; 0 for a check that keeps only sums."""
 
     def run_memory_bytes(self, cells: int, samples: int, *, corners: int = 1) -> int:
         """Predicted peak bytes of a service run: the run and its held-out refit beside it."""
@@ -276,6 +280,7 @@ spec's own ``holdout`` overrides it (docs/tuning.md#which-runs-report-what)."""
 HOLDOUT_WINDOWS: Mapping[EstimatorKind, str] = MappingProxyType(
     {
         EstimatorKind.MAP_FILTER: "estimation.holdout:holdout_error_windows",
+        EstimatorKind.MAP_OBSERVER: "estimation.holdout_observers:lpv_holdout_windows",
         EstimatorKind.TORQUE: "estimation.holdout:unmeasured_input_windows",
     }
 )

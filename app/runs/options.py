@@ -32,7 +32,8 @@ class RunOptions:
 def streams_input(spec: EstimatorSpec, dataset: Dataset) -> bool:
     """Whether a run reads its log a window at a time from the store, never whole
     (`docs/data-formats.md#streamed-runs`): when nothing in it needs the whole log — a map
-    filter or a torque estimator (:attr:`~estimation.registry.EstimatorSpec.streams`,
+    filter, a torque estimator or the LPV observer
+    (:attr:`~estimation.registry.EstimatorSpec.streams`,
     :meth:`~estimation.estimator.ChunkedEstimator.run_windows`) on a dense uploaded dataset
     (no truth to score, nothing to resample). Its sample gates are scanned a window at a
     time too (:func:`app.runs.gates.scan_gates`)."""

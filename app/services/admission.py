@@ -12,21 +12,23 @@ The predicted memory of a run is::
 
     WORKER_BASE_BYTES + (1 + h) · cost.memory_bytes(p, n, c) + 2 · 8 · channels · n
 
-and of a streamed run (a map filter or torque estimator reading its log a window at a time
-from the store, :func:`app.runs.options.streams_input`), with ``w = min(n, STREAM_ROWS)``
-the rows it holds::
+and of a streamed run (a map filter, torque estimator or LPV observer reading its log a
+window at a time from the store, :func:`app.runs.options.streams_input`), with
+``w = min(n, STREAM_ROWS)`` the rows it holds::
 
     WORKER_BASE_BYTES + (1 + h) · cost.memory_bytes(p, w, c) + 2 · 8 · channels · w
-        + (8 · outputs + 11) · n
+        + (8 · outputs + 11 + s) · n
 
 the worker process itself, the estimator's declared cost for the run and for its held-out
 refit (``h = cost.holdout_passes``: 1, or 0 for an estimator without a truth-free check,
 since the refit runs while the run's own data are held), and the dataset (its Parquet object
 as read from the artifact store, and the unpacked channels); a streamed run keeps only its
-per-sample outputs and status codes for the whole log, and at its end the RMSE's copy of
-the accepted residuals. A run with ``g`` sample gates holds ``(2 · g + 3) · n`` bytes more:
-each gate's mask and first-gate share, the accept mask and the first gate rejecting each
-sample (a streamed run scans its gates a window at a time, :func:`app.runs.gates.scan_gates`).
+per-sample outputs and status codes for the whole log, at its end the RMSE's copy of the
+accepted residuals, and what its truth-free check keeps a sample (``s =
+cost.stream_sample_bytes``: the LPV check's fit output error; 0 for a check of sums). A run
+with ``g`` sample gates holds ``(2 · g + 3) · n`` bytes more: each gate's mask and first-gate
+share, the accept mask and the first gate rejecting each sample (a streamed run scans its
+gates a window at a time, :func:`app.runs.gates.scan_gates`).
 The compute time counts the refit's work the same way.
 """
 
@@ -160,7 +162,8 @@ def admit_run(
     held = min(samples, STREAM_ROWS) if streamed else samples  # rows in memory at once
     data = FLOAT_BYTES * 2 * channels * held
     if streamed:
-        data += (FLOAT_BYTES * len(spec.output_units) + STREAM_SAMPLE_BYTES) * samples
+        per_sample = FLOAT_BYTES * len(spec.output_units) + STREAM_SAMPLE_BYTES
+        data += int((per_sample + cost.stream_sample_bytes) * samples)
     if gates:
         data += (GATE_MASK_BYTES * gates + GATES_SAMPLE_BYTES) * samples
     memory = WORKER_BASE_BYTES + cost.run_memory_bytes(cells, held, corners=corners) + data

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from estimation.errors import ConfigError, ShapeError
-from estimation.estimator import Chunk, ChunkedEstimator, WindowPlan
+from estimation.estimator import WINDOW_STEPS, Chunk, ChunkedEstimator, WindowPlan
 from estimation.filters.config import (
     KfConfig,
     NlmsConfig,
@@ -159,6 +159,7 @@ class TableFilter(ChunkedEstimator[FilterState, Prepared]):
         timeline: Callable[[], np.ndarray],
         read: Callable[[int, int], Signals],
         accept: np.ndarray | None,
+        window: int = WINDOW_STEPS,
     ) -> WindowPlan:
         """A window of :meth:`run_windows` reads the τ rows after its last step, which its
         last measurements need (sensor delay); a delay in seconds is resolved, as by

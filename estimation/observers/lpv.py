@@ -170,17 +170,18 @@ class LpvObserver(ChunkedEstimator[LpvState, LpvPrepared]):
         timeline: Callable[[], np.ndarray],
         read: Callable[[int, int], Signals],
         accept: np.ndarray | None,
+        window: int = WINDOW_STEPS,
     ) -> WindowPlan:
         """A pass over the log a window at a time for what :meth:`prepare` takes from all of
         it (:class:`LpvBox`: 8 bytes a sample for the mean T_em, as ``np.mean`` sums it, and
-        the accept mask); each window reads the row before it, for ``ṗ_im``, ``h`` and
-        ``Δω_t``."""
+        the accept mask), ``window`` rows at a time; each window reads the row before it, for
+        ``ṗ_im``, ``h`` and ``Δω_t``."""
         lo, hi = np.full(5, np.inf), np.full(5, -np.inf)
         t_em: np.ndarray | None = np.empty(n)
         mask = np.ones(n, dtype=np.bool_) if accept is None else np.array(accept, dtype=bool)
-        for a in range(0, n, WINDOW_STEPS):
+        for a in range(0, n, window):
             lead = min(a, 1)
-            rows = read(a - lead, min(a + WINDOW_STEPS, n))
+            rows = read(a - lead, min(a + window, n))
             rows.require(self.required_signals())
             rho, temperature = self._scheduling_rows(rows)
             rho = rho[lead:]
@@ -418,6 +419,9 @@ LPV_COST = Cost(
     # and the kernel's chunk outputs (5)
     sample_floats=lambda c: 20 + 4 * c,
     ops_per_sample=lambda p, c: 40 * c + 200,
+    # the streamed check's fit output error and mask, with the temporaries of its statistics
+    # (about 35 bytes a fit sample, the first 70 % of the log)
+    stream_sample_bytes=25.0,
 )
 
 LPV = EstimatorSpec(

@@ -25,7 +25,7 @@ import numpy as np
 
 from estimation import kernels
 from estimation.errors import ConfigError, ShapeError, StateError
-from estimation.estimator import ChunkedEstimator, WindowPlan
+from estimation.estimator import WINDOW_STEPS, ChunkedEstimator, WindowPlan
 from estimation.registry import Cost, EstimatorKind, EstimatorSpec, family
 from estimation.signals import Signals, uniform_period
 from estimation.state import EstimatorState
@@ -239,6 +239,7 @@ class TorqueEstimator(ChunkedEstimator[TorqueState, TorquePrepared]):
         timeline: Callable[[], np.ndarray],
         read: Callable[[int, int], Signals],
         accept: np.ndarray | None,
+        window: int = WINDOW_STEPS,
     ) -> WindowPlan:
         """Every window is prepared with the whole log's sample period (``timeline()``)."""
         time = timeline()

@@ -17,6 +17,7 @@ from estimation.holdout_observers import (
     ekf_innovations,
     ekf_predict,
     lpv_holdout,
+    lpv_holdout_windows,
     lpv_predict,
 )
 from estimation.innovation import innovation_stats
@@ -30,6 +31,7 @@ from estimation.scenarios import get_scenario
 from estimation.signals import Signals
 from tests.estimation.test_ekf import _clamp_ref, _h_ref, _propagate_ref
 from tests.estimation.test_lpv import _reference_run
+from tests.estimation.test_run_windows import Reader, _lpv_case
 
 SPECS = {s.name: s for s in EKF_SPECS}
 HELD_OUT_SEEDS = (100, 101, 102, 103)
@@ -245,6 +247,26 @@ def test_lpv_prediction_matches_the_dense_reference_and_never_reads_the_held_out
     assert_array_equal(adapted2, adapted)
     assert_array_equal(base2, base)
     assert lpv_holdout("lpv", {}, moved).adapted["rmse"] > 5 * result.adapted["rmse"]
+
+
+@pytest.mark.parametrize("source", ["channels", "model"])
+def test_the_lpv_check_a_window_at_a_time_is_the_whole_log_check(source: str) -> None:
+    """``lpv_holdout_windows`` reads at most a window and the row before it at a time, and
+    its figures (fit output-error statistics, held-out errors of the fitted and the zero map,
+    with a gate's mask) are :func:`lpv_holdout`'s bit for bit."""
+    signals, config = _lpv_case(source)
+    n = len(signals)
+    accept = np.ones(n, dtype=bool)
+    accept[50:90] = False
+    accept[330:345] = False  # in the held-out part
+    whole = lpv_holdout("lpv", config, signals, accept=accept).metrics()
+    read = Reader(signals)
+    windowed = lpv_holdout_windows("lpv", config, read, n, window=64, accept=accept).metrics()
+    assert windowed == whole
+    assert whole["holdout:samples"] < n - round(0.7 * n)  # the gate's samples are not scored
+    assert max(z - a for a, z in read.calls) <= 65
+    with pytest.raises(ConfigError, match="too short"):
+        lpv_holdout_windows("lpv", config, read, 2)
 
 
 def test_lpv_reports_output_error_statistics_and_says_nis_does_not_apply(lpv_log) -> None:

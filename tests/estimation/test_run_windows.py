@@ -274,7 +274,7 @@ def test_the_lpv_observer_in_windows_is_its_whole_log_run(source: str) -> None:
     for a, b in zip(whole, windowed, strict=True):
         _same(a, b)
     assert whole[-1].rejected["mask"] >= 40
-    assert max(z - a for a, z in read.calls if z - a < n) <= 112  # 3 chunks and the row before
+    assert max(z - a for a, z in read.calls) <= 112  # 3 chunks and the row before, plan too
     middle = whole[len(whole) // 2].state
     resumed = list(
         get_spec("lpv").build(config).run(signals, every=50, state=middle, accept=accept)

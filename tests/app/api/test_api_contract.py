@@ -14,12 +14,14 @@ from fastapi.testclient import TestClient
 
 from app.cli import main as cli_main
 from app.db.migrate import head_revision
-from app.io.csv_files import read_csv
+from app.io.csv_files import read_csv, write_csv
 from app.io.decimate import minmax_decimate
 from app.runs.gates import apply_gates, parse_gates
 from estimation.estimator import WINDOW_STEPS
 from estimation.holdout import holdout_error
+from estimation.holdout_observers import lpv_holdout
 from estimation.registry import get_spec
+from estimation.scenarios import get_scenario
 from tests.support.helpers import (
     TABLE,
     TRUE_MAP,
@@ -589,3 +591,36 @@ def test_a_streamed_torque_run_stores_the_whole_log_runs_series(
     metrics = client.get(f"/api/runs/{done['id']}").json()["metrics"]
     assert metrics["samples"] == n
     assert "holdout:not_applicable:unmeasured_input" in metrics
+
+
+@pytest.mark.slow
+def test_a_streamed_lpv_run_is_the_whole_log_fit_and_its_check(
+    client: TestClient, tmp_path: Path
+) -> None:
+    """The LPV observer on an uploaded log streams (docs/data-formats.md#streamed-runs): its
+    gain is designed on the ρ box of a first pass, each window reads the row before it, and
+    its check refits and predicts a window at a time. With a gate, the final (smooth-filled)
+    map is the whole-log fit's bit for bit, and the truth-free metrics are
+    :func:`lpv_holdout`'s with the same mask."""
+    assert get_spec("lpv").streams
+    scenario = get_scenario("maf-whtc")
+    data = scenario.build(seed=6, duration_s=300.0, mismatch="nominal")
+    path = tmp_path / "whtc.csv"
+    write_csv(data.signals, path)
+    dataset = upload_ok(client, path.read_text())
+    config = {**scenario.default_config("lpv", data), "fill": "smooth"}
+    gates = [{"type": "range", "channel": "speed_rpm", "max": 2000.0}]
+    body = {"dataset_id": dataset["id"], "estimator": "lpv", "signals": {}}
+    run = start_run(client, body | {"config": config | {"gates": gates}})
+    done = wait_run(client, run["id"], timeout=300)
+    assert done["status"] == "succeeded", done["error"]
+    signals = read_csv(path).signals
+    accept = apply_gates(parse_gates(gates, signals.names), signals).accept
+    assert 0 < np.count_nonzero(~accept) < len(signals) // 2
+    fit = get_spec("lpv").build(config).fit(signals, accept=accept)
+    assert fit.table is not None
+    got = final_values(client, done["id"])["values"]
+    np.testing.assert_array_equal(np.asarray(got), fit.table.values)
+    metrics = client.get(f"/api/runs/{done['id']}").json()["metrics"]
+    check = lpv_holdout("lpv", config, signals, accept=accept).metrics()
+    assert {k: metrics[k] for k in check} == check
