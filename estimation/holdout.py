@@ -47,7 +47,7 @@ from estimation.innovation import (
     run_innovations,
     stats_of,
 )
-from estimation.metrics import output_metrics
+from estimation.metrics import ErrorSums, output_metrics
 from estimation.signals import Signals
 from estimation.table import Table
 
@@ -232,34 +232,6 @@ def _evaluate(table: Table, inputs: list[np.ndarray], start: int, stop: int) -> 
     return out
 
 
-@dataclass(slots=True)
-class _ErrorSums:
-    """:func:`output_metrics` of an error that comes a block at a time."""
-
-    n: int = 0
-    e2: float = 0.0
-    abs_sum: float = 0.0
-    abs_max: float = 0.0
-
-    def add(self, error: np.ndarray) -> None:
-        e = error[np.isfinite(error)]
-        if e.size:
-            self.n += int(e.size)
-            self.e2 += float(np.sum(e * e))
-            self.abs_sum += float(np.sum(np.abs(e)))
-            self.abs_max = max(self.abs_max, float(np.max(np.abs(e))))
-
-    def metrics(self) -> dict[str, float]:
-        if not self.n:
-            return output_metrics(np.empty(0))
-        n = self.n
-        return {
-            "rmse": float(np.sqrt(self.e2 / n)),
-            "mae": self.abs_sum / n,
-            "max_abs_error": self.abs_max,
-        }
-
-
 def holdout_error_windows(
     estimator: str,
     config: BaseModel | dict[str, Any],
@@ -293,7 +265,7 @@ def holdout_error_windows(
             "predict the rest"
         )
     table = filt.theta0.with_values(state.theta.reshape(filt.grid.shape))
-    adapted, base = _ErrorSums(), _ErrorSums()
+    adapted, base = ErrorSums(), ErrorSums()
     tau = delay if settings.has_sensor else 0
     y_last = float(read(m - 1, m)[filt.config.output][0])
     last = {"adapted": y_last, "base": y_last}  # the sensor model's state of each map

@@ -24,6 +24,12 @@ filter continues from its posterior at ``m − 1`` with every sample masked, i.e
 propagated open loop from the inputs with the bias ``b`` (Aug) or map ``θ`` (Map) frozen;
 ``ŷ_k`` is its prior output (MAF, and the other outputs in ``outputs``). The base resets
 ``b = 0`` / ``θ = θ0`` at ``m``; Def has no parameters and no base.
+
+**A log never held whole** (a streamed service run, docs/data-formats.md#streamed-runs):
+:func:`lpv_holdout_windows` and :func:`ekf_holdout_windows` read the log a window at a time
+and the row before each (the observers' backward differences and propagation). The LPV form
+keeps the fit's output error and the scored errors, so its figures are bit for bit; the EKF
+form adds to running sums, equal up to rounding.
 """
 
 from __future__ import annotations
@@ -42,12 +48,13 @@ from estimation.estimator import WINDOW_STEPS
 from estimation.holdout import DEFAULT_FIT_FRACTION, NotApplicable, split_point
 from estimation.innovation import (
     InnovationStats,
+    InnovationSums,
     OutputErrorStats,
     innovation_stats,
     output_error_stats,
 )
 from estimation.kernels import ekf as kern
-from estimation.metrics import output_metrics
+from estimation.metrics import ErrorSums, output_metrics
 from estimation.observers.ekf import EkfModel, EkfObserver, EkfSettings, EkfState, ekf_run
 from estimation.observers.ekf_config import OUTPUT_NAMES
 from estimation.observers.lpv import LpvObserver, LpvPrepared, LpvState, lpv_run
@@ -316,7 +323,8 @@ def ekf_innovations(
         out.x, out.P, out.mem, out.counts, settings.mode, settings.g, model.time_s, model.U,
         model.Y, settings.use, settings.r_abs2, settings.r_rel2, model.accept,
         settings.q_rate, settings.p0_diag, settings.limit, settings.gate2,
-        settings.max_step_s, settings.prm, start, stop, x_out, w_c, yhat, corr, status, e, s,
+        settings.max_step_s, settings.prm, start - model.offset, stop - model.offset, x_out,
+        w_c, yhat, corr, status, e, s,
     )  # fmt: skip
     outputs = {"w_c_kg_s": w_c, "x": x_out, "yhat": yhat}
     return EkfInnovations(dataclasses.replace(out, step=stop), e, s, status, outputs)
@@ -340,17 +348,11 @@ def ekf_holdout(
     settings = obs.settings
     model = obs.prepare(signals, mask)  # sample k reads only samples ≤ k
     fit = ekf_innovations(obs.initial_state(model), model, settings, m)
-    used = [j for j, name in enumerate(OUTPUT_NAMES) if settings.use[j]]
-    primary = kern.Y_MAF if settings.use[kern.Y_MAF] else used[0]
-    nis, other_nis = None, {}
+    used, primary = _ekf_outputs(settings)
+    stats = {}
     for j in used:
-        e, s = fit.e[:, j], fit.s[:, j]
-        ok = np.isfinite(e) & (s > 0) & ~(e * e > settings.gate2 * s)  # the gate's test
-        stats = innovation_stats(e[ok], s[ok])
-        if j == primary:
-            nis = stats
-        else:
-            other_nis[OUTPUT_NAMES[j]] = stats.mean_nis
+        ok = _gate_passed(fit.e[:, j], fit.s[:, j], settings.gate2)
+        stats[j] = innovation_stats(fit.e[ok, j], fit.s[ok, j])
     adapted = ekf_predict(fit.state, model, settings, reset=False)
     base = None if settings.mode == kern.MODE_DEF else ekf_predict(fit.state, model, settings)
     scored = mask[m:]
@@ -358,18 +360,118 @@ def ekf_holdout(
     def errors(prediction: np.ndarray, j: int) -> dict[str, float]:
         return output_metrics((model.Y[m:, j] - prediction[:, j])[scored])
 
+    return _ekf_result(
+        settings,
+        fraction=fraction,
+        split=(m, n, int(np.count_nonzero(scored))),
+        stats=stats,
+        adapted={j: errors(adapted, j) for j in used},
+        base=None if base is None else errors(base, primary),
+    )
+
+
+def _ekf_outputs(settings: EkfSettings) -> tuple[list[int], int]:
+    """The used outputs (``Y_*`` indices) and the one scored first: the MAF if used."""
+    used = [j for j, name in enumerate(OUTPUT_NAMES) if settings.use[j]]
+    return used, kern.Y_MAF if settings.use[kern.Y_MAF] else used[0]
+
+
+def _gate_passed(e: np.ndarray, s: np.ndarray, gate2: float) -> np.ndarray:
+    """The scalar updates the χ² gate accepted (the kernel's test)."""
+    return np.isfinite(e) & (s > 0) & ~(e * e > gate2 * s)
+
+
+def _ekf_result(
+    settings: EkfSettings,
+    *,
+    fraction: float,
+    split: tuple[int, int, int],
+    stats: dict[int, InnovationStats],
+    adapted: dict[int, dict[str, float]],
+    base: dict[str, float] | None,
+) -> ObserverHoldout:
+    """The EKF check's report from the fit's NIS statistics and the held-out errors per
+    used output (``split``: the first held-out sample, the log's samples, those scored)."""
+    used, primary = _ekf_outputs(settings)
+    m, n, scored = split
     units = {"maf": "kg/s", "p_im": "Pa", "p_em": "Pa", "omega_t": "rad/s"}
     return ObserverHoldout(
         unit=units[OUTPUT_NAMES[primary]],
         fraction=fraction,
         fit_samples=m,
         holdout_samples=n - m,
-        scored=int(np.count_nonzero(scored)),
-        adapted=errors(adapted, primary),
-        base=None if base is None else errors(base, primary),
-        other={OUTPUT_NAMES[j]: errors(adapted, j) for j in used if j != primary},
-        innovations=nis,
-        other_nis=other_nis,
+        scored=scored,
+        adapted=adapted[primary],
+        base=base,
+        other={OUTPUT_NAMES[j]: adapted[j] for j in used if j != primary},
+        innovations=stats[primary],
+        other_nis={OUTPUT_NAMES[j]: stats[j].mean_nis for j in used if j != primary},
+    )
+
+
+def ekf_holdout_windows(
+    estimator: str,
+    config: BaseModel | dict[str, Any],
+    read: Callable[[int, int], Signals],
+    n: int,
+    *,
+    unit: str = "",
+    fraction: float = DEFAULT_FIT_FRACTION,
+    window: int = WINDOW_STEPS,
+    timeline: Callable[[], np.ndarray] | None = None,
+    accept: np.ndarray | None = None,
+) -> ObserverHoldout:
+    """:func:`ekf_holdout` of a log of ``n`` samples that is never held whole: ``read(a, z)``
+    gives its rows ``a … z−1``, read ``window`` at a time and the row before (from which the
+    kernel propagates). The fit carries the filter across the windows of the first part,
+    adding each window's gated innovations to running sums; the prediction carries the
+    open-loop filter (and its base) across the rest, adding the scored errors to running
+    sums. The figures equal :func:`ekf_holdout`'s up to rounding
+    (``tests/estimation/test_holdout_observers.py``); nothing is kept a sample. ``unit`` and
+    ``timeline`` are the common signature of
+    :data:`estimation.registry.HOLDOUT_WINDOWS`'s functions (the unit is the output's)."""
+    obs = get_spec(estimator).build(config)
+    if not isinstance(obs, EkfObserver):
+        raise ConfigError(f"{estimator!r} is not an EKF")
+    m, mask = _split(n, fraction, accept)
+    settings = obs.settings
+    used, primary = _ekf_outputs(settings)
+
+    def window_model(a: int, z: int, keep: np.ndarray) -> EkfModel:
+        first = a - min(a, 1)
+        return obs.prepare_window(read(first, z), keep[first:z], a, n, None)
+
+    nis = {j: InnovationSums() for j in used}
+    state: EkfState | None = None
+    for a in range(0, m, window):
+        model = window_model(a, min(a + window, m), mask)
+        start = obs.initial_state(model) if state is None else state
+        fit = ekf_innovations(start, model, settings, model.end)
+        for j in used:
+            ok = _gate_passed(fit.e[:, j], fit.s[:, j], settings.gate2)
+            nis[j].add(fit.e[ok, j], fit.s[ok, j])
+        state = fit.state
+    assert state is not None
+    states = [state] if settings.mode == kern.MODE_DEF else [state, _reset(state, settings)]
+    adapted = {j: ErrorSums() for j in used}
+    base = ErrorSums()
+    masked = np.zeros(n, dtype=np.bool_)  # the prediction updates on nothing
+    for a in range(m, n, window):
+        model = window_model(a, min(a + window, n), masked)
+        scored = mask[a : model.end]
+        for i, start in enumerate(states):
+            states[i], outputs, _ = ekf_run(start, model, settings, model.end)
+            prediction = _prior_outputs(outputs)
+            for j in used if i == 0 else [primary]:
+                error = (model.Y[1:, j] - prediction[:, j])[scored]
+                (adapted[j] if i == 0 else base).add(error)
+    return _ekf_result(
+        settings,
+        fraction=fraction,
+        split=(m, n, int(np.count_nonzero(mask[m:]))),
+        stats={j: sums.stats() for j, sums in nis.items()},
+        adapted={j: sums.metrics() for j, sums in adapted.items()},
+        base=None if len(states) == 1 else base.metrics(),
     )
 
 
@@ -380,16 +482,24 @@ def ekf_predict(
     masked) from ``state`` (step ``m``) to the end of ``model``; with ``reset`` the bias or
     map states start at their initial value (``0`` / ``θ0``) instead of the fitted one."""
     if reset:
-        x = state.x.copy()
-        x[kern.N_X :] = settings.theta0 if settings.mode == kern.MODE_MAP else 0.0
-        state = dataclasses.replace(state, x=x)
+        state = _reset(state, settings)
     frozen = dataclasses.replace(model, accept=np.zeros_like(model.accept))
-    n = model.U.shape[0]
-    _, outputs, _ = ekf_run(state, frozen, settings, n)
-    x_out = np.column_stack([outputs["p_im_pa"], outputs["p_em_pa"], outputs["omega_t_rad_s"]])
-    out = np.full((n - state.step, kern.N_Y), math.nan)
+    _, outputs, _ = ekf_run(state, frozen, settings, model.end)
+    return _prior_outputs(outputs)
+
+
+def _reset(state: EkfState, settings: EkfSettings) -> EkfState:
+    """``state`` with the bias or map states at their initial value (``0`` / ``θ0``)."""
+    x = state.x.copy()
+    x[kern.N_X :] = settings.theta0 if settings.mode == kern.MODE_MAP else 0.0
+    return dataclasses.replace(state, x=x)
+
+
+def _prior_outputs(outputs: dict[str, np.ndarray]) -> np.ndarray:
+    """``(k, 4)`` prior outputs (``Y_*`` order) of a masked :func:`ekf_run`'s outputs."""
+    out = np.full((outputs["maf_prediction"].size, kern.N_Y), math.nan)
     out[:, kern.Y_MAF] = outputs["maf_prediction"]
-    out[:, kern.Y_P_IM] = x_out[:, 0]  # masked: the posterior is the prior
-    out[:, kern.Y_P_EM] = x_out[:, 1]
-    out[:, kern.Y_OMEGA_T] = x_out[:, 2]
+    out[:, kern.Y_P_IM] = outputs["p_im_pa"]  # masked: the posterior is the prior
+    out[:, kern.Y_P_EM] = outputs["p_em_pa"]
+    out[:, kern.Y_OMEGA_T] = outputs["omega_t_rad_s"]
     return out

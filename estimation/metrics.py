@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -86,6 +87,35 @@ def output_metrics(error: np.ndarray) -> dict[str, float]:
         "mae": float(np.mean(np.abs(e))),
         "max_abs_error": float(np.max(np.abs(e))),
     }
+
+
+@dataclass(slots=True)
+class ErrorSums:
+    """:func:`output_metrics` of an error that comes a block at a time (a log read in
+    windows): running sums, equal to the whole-array figures up to rounding."""
+
+    n: int = 0
+    e2: float = 0.0
+    abs_sum: float = 0.0
+    abs_max: float = 0.0
+
+    def add(self, error: np.ndarray) -> None:
+        e = error[np.isfinite(error)]
+        if e.size:
+            self.n += int(e.size)
+            self.e2 += float(np.sum(e * e))
+            self.abs_sum += float(np.sum(np.abs(e)))
+            self.abs_max = max(self.abs_max, float(np.max(np.abs(e))))
+
+    def metrics(self) -> dict[str, float]:
+        if not self.n:
+            return output_metrics(np.empty(0))
+        n = self.n
+        return {
+            "rmse": float(np.sqrt(self.e2 / n)),
+            "mae": self.abs_sum / n,
+            "max_abs_error": self.abs_max,
+        }
 
 
 def torque_metrics(

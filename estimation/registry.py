@@ -281,6 +281,7 @@ HOLDOUT_WINDOWS: Mapping[EstimatorKind, str] = MappingProxyType(
     {
         EstimatorKind.MAP_FILTER: "estimation.holdout:holdout_error_windows",
         EstimatorKind.MAP_OBSERVER: "estimation.holdout_observers:lpv_holdout_windows",
+        EstimatorKind.JOINT_EKF: "estimation.holdout_observers:ekf_holdout_windows",
         EstimatorKind.TORQUE: "estimation.holdout:unmeasured_input_windows",
     }
 )

@@ -31,9 +31,9 @@ class RunOptions:
 
 def streams_input(spec: EstimatorSpec, dataset: Dataset) -> bool:
     """Whether a run reads its log a window at a time from the store, never whole
-    (`docs/data-formats.md#streamed-runs`): when nothing in it needs the whole log — a map
-    filter, a torque estimator or the LPV observer
-    (:attr:`~estimation.registry.EstimatorSpec.streams`,
+    (`docs/data-formats.md#streamed-runs`): when nothing in it needs the whole log — an
+    estimator that plans windows, with a windowed check
+    (:attr:`~estimation.registry.EstimatorSpec.streams`: every built-in one,
     :meth:`~estimation.estimator.ChunkedEstimator.run_windows`) on a dense uploaded dataset
     (no truth to score, nothing to resample). Its sample gates are scanned a window at a
     time too (:func:`app.runs.gates.scan_gates`)."""

@@ -12,8 +12,8 @@ The predicted memory of a run is::
 
     WORKER_BASE_BYTES + (1 + h) · cost.memory_bytes(p, n, c) + 2 · 8 · channels · n
 
-and of a streamed run (a map filter, torque estimator or LPV observer reading its log a
-window at a time from the store, :func:`app.runs.options.streams_input`), with
+and of a streamed run (any estimator on an uploaded dense log, reading it a window at a
+time from the store, :func:`app.runs.options.streams_input`), with
 ``w = min(n, STREAM_ROWS)`` the rows it holds::
 
     WORKER_BASE_BYTES + (1 + h) · cost.memory_bytes(p, w, c) + 2 · 8 · channels · w

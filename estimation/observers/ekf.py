@@ -27,7 +27,9 @@ The ``w_c_kg_s`` output of every snapshot is ``W_c(x̂)``, the estimate of the *
 compressor flow, on which Def, Aug and Map compare (EKF Table 1); ``p_im_pa``, ``p_em_pa``,
 ``omega_t_rad_s`` are the state estimates (Table 1's other rows). Counts of gated and
 damped updates per output and of state clamps are in each snapshot's ``metrics``. The settings
-of each variant are in :mod:`estimation.observers.ekf_config`.
+of each variant are in :mod:`estimation.observers.ekf_config`. A log read a window at a time
+(:meth:`~estimation.estimator.ChunkedEstimator.run_windows`) gives each window the row before
+it, from which the kernel propagates; the run is the whole log's bit for bit.
 
 Defaults (``maf-1d-whtc``, seeds 0–2, whole WHTC): RMS error of ``W_c`` ≈ 0.45 g/s (Def),
 0.10 g/s (Aug and Map) against a MAF error of 1.8 g/s RMS; Map's ``q`` is within
@@ -48,6 +50,7 @@ Example
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -56,7 +59,7 @@ from pydantic import BaseModel
 
 from estimation import kernels
 from estimation.errors import ConfigError, ShapeError, StateError
-from estimation.estimator import Chunk, ChunkedEstimator
+from estimation.estimator import WINDOW_STEPS, Chunk, ChunkedEstimator, WindowPlan
 from estimation.observers.ekf_config import (
     OUTPUT_NAMES,
     EkfAugConfig,
@@ -114,27 +117,44 @@ class EkfState(EstimatorState):
 
 @dataclass(frozen=True, slots=True, eq=False)
 class EkfModel:
-    """A log turned into kernel inputs (whole log; chunks index into it).
+    """A log, or rows ``offset …`` of one, turned into kernel inputs (chunks index into it).
 
     ``U`` (n, 4) inputs in ``U_*`` order; ``Y`` (n, 4) measurements in ``Y_*`` order (NaN
-    for outputs not used); ``accept`` (n,); ``time_s`` (n,).
+    for outputs not used); ``accept`` (n,); ``time_s`` (n,). A window of a log of ``total``
+    samples (:meth:`EkfObserver.prepare_window`) starts at log sample ``offset``, the row
+    before its first step (the kernel propagates from sample ``k − 1``).
     """
 
     U: np.ndarray
     Y: np.ndarray
     accept: np.ndarray
     time_s: np.ndarray
+    offset: int = 0
+    total: int = 0
+
+    @property
+    def end(self) -> int:
+        """The log sample after the model's last row."""
+        return self.offset + int(self.U.shape[0])
 
 
 def prepare_model(
-    signals: Signals, config: EkfConfig, *, accept: np.ndarray | None = None
+    signals: Signals,
+    config: EkfConfig,
+    *,
+    accept: np.ndarray | None = None,
+    offset: int = 0,
+    total: int | None = None,
 ) -> EkfModel:
-    """Kernel inputs for a whole log (validates channels, ranges and the accept mask)."""
+    """Kernel inputs for a log, or for its rows ``offset …`` of ``total`` (validates
+    channels, ranges and the accept mask; a message names the sample in the whole log)."""
     ch = config.channels
     signals.require(ch.inputs() + [ch.output(o) for o in config.outputs])
     n = len(signals)
-    if n < 2:
-        raise ConfigError(f"the EKF needs at least two samples, got {n}")
+    if (n if total is None else total) < 2:
+        raise ConfigError(
+            f"the EKF needs at least two samples, got {n if total is None else total}"
+        )
     mask = np.ones(n, dtype=np.bool_) if accept is None else np.asarray(accept, dtype=bool)
     if mask.shape != (n,):
         raise ShapeError(f"accept mask has shape {mask.shape}, the log has {n} samples")
@@ -142,11 +162,11 @@ def prepare_model(
         values = signals[name]
         if np.any(values <= 0):
             k = int(np.argmax(values <= 0))
-            raise ConfigError(f"{name!r} must be > 0, got {values[k]:g} at sample {k}")
+            raise ConfigError(f"{name!r} must be > 0, got {values[k]:g} at sample {k + offset}")
     fuel = signals[ch.fuel]
     if np.any(fuel < 0):
         k = int(np.argmax(fuel < 0))
-        raise ConfigError(f"{ch.fuel!r} must be ≥ 0, got {fuel[k]:g} at sample {k}")
+        raise ConfigError(f"{ch.fuel!r} must be ≥ 0, got {fuel[k]:g} at sample {k + offset}")
     Y = np.full((n, kernels.ekf.N_Y), np.nan)
     for o in config.outputs:
         Y[:, OUTPUT_NAMES.index(o)] = signals[ch.output(o)]
@@ -155,6 +175,8 @@ def prepare_model(
         Y=Y,
         accept=mask,
         time_s=signals.time,
+        offset=offset,
+        total=n if total is None else total,
     )
 
 
@@ -255,9 +277,9 @@ def ekf_run(
     per-sample status (0 accepted, 1 masked, 2 gated).
     """
     start = state.step
-    n_log = model.U.shape[0]
-    if not 0 <= start <= stop <= n_log:
-        raise StateError(f"cannot run from sample {start} to {stop} of {n_log}")
+    first = model.offset + (1 if model.offset else 0)  # a window's row before is not a step
+    if not first <= start <= stop <= model.end:
+        raise StateError(f"cannot run from sample {start} to {stop} of {first} … {model.end}")
     out = state.copy()
     n = stop - start
     x_out = np.empty((n, kernels.ekf.N_X))
@@ -285,8 +307,8 @@ def ekf_run(
         settings.gate2,
         settings.max_step_s,
         settings.prm,
-        start,
-        stop,
+        start - model.offset,  # k > 0 in the window iff in the log: it holds the row before
+        stop - model.offset,
         x_out,
         w_c,
         yhat,
@@ -309,7 +331,8 @@ def ekf_run(
         "p_em_pa": x_out[:, 1],
         "omega_t_rad_s": x_out[:, 2],
         "maf_prediction": yhat[:, kernels.ekf.Y_MAF],
-        "residual": model.Y[start:stop, kernels.ekf.Y_MAF] - yhat[:, kernels.ekf.Y_MAF],
+        "residual": model.Y[start - model.offset : stop - model.offset, kernels.ekf.Y_MAF]
+        - yhat[:, kernels.ekf.Y_MAF],
     }
     if settings.mode == kernels.ekf.MODE_AUG:
         outputs["maf_bias_kg_s"] = corr
@@ -324,6 +347,7 @@ class EkfObserver(ChunkedEstimator[EkfState, EkfModel]):
     (``state`` from a snapshot or :meth:`EkfState.load` resumes bit-identically)."""
 
     state_class = EkfState
+    windowed = True
 
     def __init__(self, name: str, config: EkfConfig) -> None:
         if name not in VARIANTS:
@@ -350,11 +374,31 @@ class EkfObserver(ChunkedEstimator[EkfState, EkfModel]):
     def prepare(self, signals: Signals, accept: np.ndarray | None = None) -> EkfModel:
         return prepare_model(signals, self.config, accept=accept)
 
+    def plan_windows(
+        self,
+        n: int,
+        timeline: Callable[[], np.ndarray],
+        read: Callable[[int, int], Signals],
+        accept: np.ndarray | None,
+        window: int = WINDOW_STEPS,
+    ) -> WindowPlan:
+        """Nothing of the whole log: each window reads the row before it, from which the
+        kernel propagates its first sample."""
+        if n < 2:
+            raise ConfigError(f"the EKF needs at least two samples, got {n}")
+        return WindowPlan(steps=n, extra_rows=0, context=None, rows_before=1)
+
+    def prepare_window(
+        self, signals: Signals, accept: np.ndarray | None, offset: int, n: int, context: None
+    ) -> EkfModel:
+        first = offset - min(offset, 1)
+        return prepare_model(signals, self.config, accept=accept, offset=first, total=n)
+
     def initial_state(self, model: EkfModel) -> EkfState:
         return initial_state(self.name, model, self.settings, self.config)
 
     def steps(self, prepared: EkfModel) -> int:
-        return int(prepared.U.shape[0])
+        return prepared.end
 
     def start(self, signals: Signals, prepared: EkfModel) -> EkfState:
         return self.initial_state(prepared)
@@ -380,6 +424,12 @@ class EkfObserver(ChunkedEstimator[EkfState, EkfModel]):
 
     def times(self, prepared: EkfModel) -> np.ndarray:
         return prepared.time_s
+
+    def n_samples(self, prepared: EkfModel) -> int:
+        return prepared.total
+
+    def time_of(self, prepared: EkfModel, sample: int) -> float:
+        return float(prepared.time_s[max(sample - 1, 0) - prepared.offset])
 
     def report(self, state: EkfState, prepared: EkfModel, chunk: Chunk) -> dict[str, Any]:
         table = self.map_table(state)

@@ -14,6 +14,7 @@ from estimation.errors import ConfigError
 from estimation.holdout import UNMEASURED_INPUT, unmeasured_input
 from estimation.holdout_observers import (
     ekf_holdout,
+    ekf_holdout_windows,
     ekf_innovations,
     ekf_predict,
     lpv_holdout,
@@ -189,6 +190,27 @@ def test_ekf_holdout_matches_an_open_loop_reference(name, short) -> None:
     ok = np.isfinite(e) & (e * e <= st.gate2 * s)
     assert result.innovations == innovation_stats(e[ok], s[ok])
     assert ok.sum() == result.innovations.samples < m  # the outlier at 60 is gated out
+
+
+@pytest.mark.parametrize(("name", "outputs"), [("ekf-def", ["maf", "p_im"]), ("ekf-map", ["maf"])])
+def test_the_ekf_check_a_window_at_a_time_is_the_whole_log_check(name, outputs, short) -> None:
+    """``ekf_holdout_windows`` reads at most a window and the row before at a time; with a
+    gated outlier and a mask in both parts its figures (NIS of every used output, held-out
+    errors, base) are :func:`ekf_holdout`'s up to the running sums' rounding."""
+    signals, accept = _outlier_log(short)
+    accept[100:110] = False  # and in the fit part
+    config = {"outputs": outputs, "max_step_s": 0.01}
+    whole = ekf_holdout(name, config, signals, accept=accept).metrics()
+    read = Reader(signals)
+    n = len(signals)
+    windowed = ekf_holdout_windows(name, config, read, n, window=40, accept=accept).metrics()
+    assert windowed.keys() == whole.keys()
+    for key, value in whole.items():
+        assert windowed[key] == pytest.approx(value, rel=1e-9, abs=1e-12), key
+    assert whole["holdout:samples"] == np.count_nonzero(accept[round(0.7 * n) :])
+    assert max(z - a for a, z in read.calls) <= 41
+    with pytest.raises(ConfigError, match="too short"):
+        ekf_holdout_windows(name, config, read, 2)
 
 
 def test_ekf_def_has_no_base_and_other_outputs_are_scored(short) -> None:

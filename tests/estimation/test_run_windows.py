@@ -3,7 +3,7 @@
 :meth:`ChunkedEstimator.run_windows` reads the log through ``read(a, z)`` (here: slices of
 the same log, each read recorded) and must yield the snapshots of ``run`` — samples, times,
 outputs, status codes, maps, variances, states — for every map filter, with and without a
-sensor delay, every torque law and the LPV observer, from the start and resumed, and never
+sensor delay, every torque law, the LPV observer and the EKFs, from the start and resumed, and never
 read more than a window plus the delay's rows (or the row before it) at once.
 """
 
@@ -287,3 +287,51 @@ def test_the_lpv_observer_in_windows_is_its_whole_log_run(source: str) -> None:
     assert len(again) == len(resumed)
     for a, b in zip(resumed, again, strict=True):
         _same(a, b)
+
+
+@pytest.fixture(scope="module")
+def ekf_log() -> Signals:
+    """30 s of the WHTC air path with a MAF error over W (0.1 s samples)."""
+    return get_scenario("maf-1d-whtc").build(seed=2, duration_s=30.0, mismatch="nominal").signals
+
+
+@pytest.mark.parametrize("name", ["ekf-def", "ekf-aug", "ekf-map"])
+def test_an_ekf_in_windows_is_its_whole_log_run(name: str, ekf_log: Signals) -> None:
+    """Each window reads the row before it, from which the kernel propagates its first
+    sample; snapshots (diagnostics too), maps, variances and states are the whole run's bit
+    for bit, with a mask, a second output, and resumed."""
+    config = {"outputs": ["maf", "p_im"]}
+    n = len(ekf_log)
+    accept = np.ones(n, dtype=bool)
+    accept[100:130] = False
+    whole = list(get_spec(name).build(config).run(ekf_log, every=23, accept=accept))
+    read = Reader(ekf_log)
+    windowed = list(
+        get_spec(name).build(config).run_windows(read, n, every=23, window=60, accept=accept)
+    )
+    assert len(windowed) == len(whole) > n // 60
+    for a, b in zip(whole, windowed, strict=True):
+        _same(a, b)
+        assert a.metrics == b.metrics
+    assert whole[-1].rejected["mask"] == 30
+    assert max(z - a for a, z in read.calls) <= 70  # 3 chunks and the row before
+    middle = whole[len(whole) // 2].state
+    resumed = list(get_spec(name).build(config).run(ekf_log, every=40, state=middle))
+    again = list(
+        get_spec(name).build(config).run_windows(Reader(ekf_log), n, every=40, state=middle)
+    )
+    assert len(again) == len(resumed)
+    for a, b in zip(resumed, again, strict=True):
+        _same(a, b)
+
+
+def test_an_ekf_window_names_a_bad_sample_by_its_place_in_the_log(ekf_log: Signals) -> None:
+    channels = dict(ekf_log.channels)
+    channels["fuel_mg_per_cycle"] = channels["fuel_mg_per_cycle"].copy()
+    channels["fuel_mg_per_cycle"][205] = -1.0
+    bad = Signals(ekf_log.time, channels, ekf_log.units)
+    ekf = get_spec("ekf-aug").build({})
+    with pytest.raises(ConfigError, match="at sample 205"):
+        list(ekf.run_windows(Reader(bad), len(bad), every=50, window=100))
+    with pytest.raises(ConfigError, match="at least two samples"):
+        list(ekf.run_windows(Reader(bad), 1, every=50))

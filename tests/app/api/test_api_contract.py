@@ -19,7 +19,7 @@ from app.io.decimate import minmax_decimate
 from app.runs.gates import apply_gates, parse_gates
 from estimation.estimator import WINDOW_STEPS
 from estimation.holdout import holdout_error
-from estimation.holdout_observers import lpv_holdout
+from estimation.holdout_observers import ekf_holdout, lpv_holdout
 from estimation.registry import get_spec
 from estimation.scenarios import get_scenario
 from tests.support.helpers import (
@@ -624,3 +624,43 @@ def test_a_streamed_lpv_run_is_the_whole_log_fit_and_its_check(
     metrics = client.get(f"/api/runs/{done['id']}").json()["metrics"]
     check = lpv_holdout("lpv", config, signals, accept=accept).metrics()
     assert {k: metrics[k] for k in check} == check
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["ekf-aug", "ekf-map"])
+def test_a_streamed_ekf_run_is_the_whole_log_fit_and_its_check(
+    client: TestClient, tmp_path: Path, name: str
+) -> None:
+    """An EKF on an uploaded log streams (docs/data-formats.md#streamed-runs): each window
+    reads the row before it, and its check refits and predicts a window at a time. With a
+    gate, the final map or bias, the stored series and the diagnostics are the whole-log
+    fit's bit for bit, and the truth-free metrics :func:`ekf_holdout`'s up to rounding."""
+    assert get_spec(name).streams
+    data = get_scenario("maf-1d-whtc").build(seed=4, duration_s=120.0, mismatch="nominal")
+    path = tmp_path / "whtc.csv"
+    write_csv(data.signals, path)
+    dataset = upload_ok(client, path.read_text())
+    config = get_scenario("maf-1d-whtc").default_config(name, data)
+    gates = [{"type": "range", "channel": "speed_rpm", "max": 2000.0}]
+    body = {"dataset_id": dataset["id"], "estimator": name, "signals": {}}
+    run = start_run(client, body | {"config": config | {"gates": gates}})
+    done = wait_run(client, run["id"], timeout=300)
+    assert done["status"] == "succeeded", done["error"]
+    signals = read_csv(path).signals
+    accept = apply_gates(parse_gates(gates, signals.names), signals).accept
+    assert 0 < np.count_nonzero(~accept) < len(signals) // 2
+    fit = get_spec(name).build(config).fit(signals, accept=accept)
+    document = client.get(f"/api/runs/{done['id']}").json()
+    if fit.table is not None:
+        got = final_values(client, done["id"])["values"]
+        np.testing.assert_array_equal(np.asarray(got), fit.table.values)
+    series = client.get(f"/api/runs/{done['id']}/series", params={"points": 4000}).json()
+    stored = minmax_decimate(signals.time, fit.outputs, 4000)
+    time, expected = minmax_decimate(*stored, 4000)
+    assert series["time"] == time.tolist()
+    for output, values in expected.items():
+        assert series["series"][output]["values"] == values.tolist(), output
+    metrics = document["metrics"]
+    check = ekf_holdout(name, config, signals, accept=accept).metrics()
+    for key, value in check.items():
+        assert metrics[key] == pytest.approx(value, rel=1e-9, abs=1e-12), key
