@@ -81,6 +81,34 @@ WINDOW_STEPS = 1 << 18
 
 
 @dataclass(frozen=True, slots=True)
+class LogWindows:
+    """A log of ``n`` samples that :meth:`ChunkedEstimator.run_windows` never holds whole:
+    ``read(a, z)`` gives its rows ``a … z−1``, ``timeline()`` its time column, ``accept`` the
+    ``(n,)`` mask of the samples the estimator may learn from (``None``: all), and ``window``
+    the rows a pass over it reads at a time."""
+
+    n: int
+    read: Callable[[int, int], Signals]
+    timeline: Callable[[], np.ndarray]
+    accept: np.ndarray | None
+    window: int = WINDOW_STEPS
+
+    @classmethod
+    def over(
+        cls,
+        read: Callable[[int, int], Signals],
+        n: int,
+        *,
+        timeline: Callable[[], np.ndarray] | None = None,
+        accept: np.ndarray | None = None,
+        window: int = WINDOW_STEPS,
+    ) -> LogWindows:
+        """The log ``read`` gives; without ``timeline`` its time column is ``read(0, n)``'s
+        (the log read whole once, if a plan asks for it)."""
+        return cls(n, read, timeline or (lambda: read(0, n).time), accept, window)
+
+
+@dataclass(frozen=True, slots=True)
 class WindowPlan:
     """How :meth:`ChunkedEstimator.run_windows` reads a log: ``steps`` kernel steps in all,
     each window with ``extra_rows`` rows after its last step (a sensor delay's) and
@@ -238,19 +266,10 @@ class ChunkedEstimator(ABC, Generic[S, P]):
             state, outputs, status = self.advance(state, prepared, min(start + chunk, steps))
             yield self.snapshot(state, prepared, start, outputs, status)
 
-    def plan_windows(
-        self,
-        n: int,
-        timeline: Callable[[], np.ndarray],
-        read: Callable[[int, int], Signals],
-        accept: np.ndarray | None,
-        window: int = WINDOW_STEPS,
-    ) -> WindowPlan:
-        """The :class:`WindowPlan` of a log of ``n`` samples whose time column ``timeline()``
-        gives (read only if the plan needs it); ``read`` and ``accept`` are
-        :meth:`run_windows`'s, for a plan that takes more of the whole log than its time
-        column (a pass ``window`` rows at a time). An estimator that sets ``windowed`` says
-        how."""
+    def plan_windows(self, log: LogWindows) -> WindowPlan:
+        """The :class:`WindowPlan` of ``log``: ``log.timeline()`` is read only if the plan
+        needs the time column, ``log.read`` for a plan that takes more of the whole log (a
+        pass ``log.window`` rows at a time). An estimator that sets ``windowed`` says how."""
         raise NotImplementedError(f"{self.name} reads its log whole")
 
     def prepare_window(
@@ -290,7 +309,9 @@ class ChunkedEstimator(ABC, Generic[S, P]):
             raise ConfigError(f"every must be >= 1 sample, got {every}")
         if accept is not None and np.shape(accept) != (n,):
             raise ShapeError(f"accept mask has shape {np.shape(accept)}, the log has {n} samples")
-        plan = self.plan_windows(n, timeline or (lambda: read(0, n).time), read, accept, window)
+        plan = self.plan_windows(
+            LogWindows.over(read, n, timeline=timeline, accept=accept, window=window)
+        )
         steps = plan.steps
         span = max(1, -(-window // chunk)) * chunk
 

@@ -35,7 +35,7 @@ from pydantic import BaseModel
 
 from estimation import kernels
 from estimation.errors import ConfigError, ShapeError
-from estimation.estimator import WINDOW_STEPS
+from estimation.estimator import LogWindows
 from estimation.filters.estimator import REGRESSOR_BLOCK, Prepared, TableFilter
 from estimation.filters.functions import run_chunk
 from estimation.filters.settings import FilterSettings
@@ -141,18 +141,14 @@ def unmeasured_input(
 def unmeasured_input_windows(
     estimator: str,
     config: BaseModel | dict[str, Any],
-    read: Callable[[int, int], Signals],
-    n: int,
+    log: LogWindows,
     *,
     unit: str = "",
     fraction: float = DEFAULT_FIT_FRACTION,
-    window: int = WINDOW_STEPS,
-    timeline: Callable[[], np.ndarray] | None = None,
-    accept: np.ndarray | None = None,
 ) -> NotApplicable:
     """:func:`unmeasured_input` of a log never held whole (nothing is read); the arguments are
     :func:`holdout_error_windows`'s."""
-    split_point(n, fraction)
+    split_point(log.n, fraction)
     return UNMEASURED_INPUT
 
 
@@ -235,28 +231,24 @@ def _evaluate(table: Table, inputs: list[np.ndarray], start: int, stop: int) -> 
 def holdout_error_windows(
     estimator: str,
     config: BaseModel | dict[str, Any],
-    read: Callable[[int, int], Signals],
-    n: int,
+    log: LogWindows,
     *,
     unit: str,
     fraction: float = DEFAULT_FIT_FRACTION,
-    window: int = WINDOW_STEPS,
-    timeline: Callable[[], np.ndarray] | None = None,
-    accept: np.ndarray | None = None,
 ) -> HoldoutResult:
-    """:func:`holdout_error` of a log of ``n`` samples that is never held whole:
-    ``read(a, z)`` gives its rows ``a … z−1``, read ``window`` at a time, once for the fit
-    and once for the prediction; ``timeline()`` its time column, read only for a delay in
-    seconds (as :meth:`TableFilter.run_windows`); ``accept`` the ``(n,)`` mask of the samples
-    fitted and scored (default: all). The statistics are running sums, equal to
-    :func:`holdout_error`'s up to rounding (``tests/estimation/test_holdout.py``)."""
+    """:func:`holdout_error` of a ``log`` that is never held whole: its rows are read
+    ``log.window`` at a time, once for the fit and once for the prediction; its time column
+    only for a delay in seconds (as :meth:`TableFilter.run_windows`); ``log.accept`` is the
+    mask of the samples fitted and scored (default: all). The statistics are running sums,
+    equal to :func:`holdout_error`'s up to rounding (``tests/estimation/test_holdout.py``)."""
+    read, n, window = log.read, log.n, log.window
     m = split_point(n, fraction)
+    accept = log.accept
     mask = np.ones(n, dtype=np.bool_) if accept is None else np.asarray(accept, dtype=np.bool_)
     if mask.shape != (n,):
         raise ShapeError(f"accept mask has shape {mask.shape}, the log has {n} samples")
     filt = map_filter(estimator, config)
-    first_m = (lambda: timeline()[:m]) if timeline is not None else (lambda: read(0, m).time)
-    settings = filt.settings_on(m, first_m)
+    settings = filt.settings_on(m, lambda: log.timeline()[:m])
     sums, state, settings = _fit_windows(filt, read, mask[:m], window, settings)
     delay = settings.delay
     if m - delay < 1 or n - m < 1:

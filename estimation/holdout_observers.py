@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -44,7 +43,7 @@ import numpy as np
 from pydantic import BaseModel
 
 from estimation.errors import ConfigError
-from estimation.estimator import WINDOW_STEPS
+from estimation.estimator import LogWindows
 from estimation.holdout import DEFAULT_FIT_FRACTION, NotApplicable, split_point
 from estimation.innovation import (
     InnovationStats,
@@ -229,30 +228,26 @@ def _frozen_states(state: LpvState) -> tuple[LpvState, LpvState]:
 def lpv_holdout_windows(
     estimator: str,
     config: BaseModel | dict[str, Any],
-    read: Callable[[int, int], Signals],
-    n: int,
+    log: LogWindows,
     *,
     unit: str = "kg/s",
     fraction: float = DEFAULT_FIT_FRACTION,
-    window: int = WINDOW_STEPS,
-    timeline: Callable[[], np.ndarray] | None = None,
-    accept: np.ndarray | None = None,
 ) -> ObserverHoldout:
-    """:func:`lpv_holdout` of a log of ``n`` samples that is never held whole: ``read(a, z)``
-    gives its rows ``a … z−1``, read ``window`` at a time (and the row before, for the
-    backward differences). The fit is :meth:`~estimation.estimator.ChunkedEstimator.run_windows`
-    over the first ``m`` rows, whose plan designs the gain on their ρ box as the whole-log fit
-    does; the prediction carries the two frozen observers across the windows of the rest.
+    """:func:`lpv_holdout` of a ``log`` that is never held whole: its rows are read
+    ``log.window`` at a time (and the row before, for the backward differences). The fit is
+    :meth:`~estimation.estimator.ChunkedEstimator.run_windows` over the first ``m`` rows,
+    whose plan designs the gain on their ρ box as the whole-log fit does; the prediction
+    carries the two frozen observers across the windows of the rest.
     The fit's output error and accept mask (about 35 bytes a fit sample while its
     statistics are taken) and then the scored prediction errors (16 bytes a held-out sample)
     are kept, so the metrics are :func:`lpv_holdout`'s bit for bit
-    (``tests/estimation/test_holdout_observers.py``). ``unit`` and ``timeline`` are the
-    common signature of :data:`estimation.registry.HOLDOUT_WINDOWS`'s functions: the MAF
-    error is in kg/s and the observer reads its own time column."""
+    (``tests/estimation/test_holdout_observers.py``). ``unit`` is in the common signature of
+    :data:`estimation.registry.HOLDOUT_WINDOWS`'s functions: the MAF error is in kg/s."""
     obs = get_spec(estimator).build(config)
     if not isinstance(obs, LpvObserver):
         raise ConfigError(f"{estimator!r} is not the LPV observer")
-    m, mask = _split(n, fraction, accept)
+    read, n, window = log.read, log.n, log.window
+    m, mask = _split(n, fraction, log.accept)
     c = obs.config
     residual, fit_accept = np.empty(m), np.empty(m, dtype=np.bool_)
     state: LpvState | None = None
@@ -412,28 +407,24 @@ def _ekf_result(
 def ekf_holdout_windows(
     estimator: str,
     config: BaseModel | dict[str, Any],
-    read: Callable[[int, int], Signals],
-    n: int,
+    log: LogWindows,
     *,
     unit: str = "",
     fraction: float = DEFAULT_FIT_FRACTION,
-    window: int = WINDOW_STEPS,
-    timeline: Callable[[], np.ndarray] | None = None,
-    accept: np.ndarray | None = None,
 ) -> ObserverHoldout:
-    """:func:`ekf_holdout` of a log of ``n`` samples that is never held whole: ``read(a, z)``
-    gives its rows ``a … z−1``, read ``window`` at a time and the row before (from which the
-    kernel propagates). The fit carries the filter across the windows of the first part,
-    adding each window's gated innovations to running sums; the prediction carries the
-    open-loop filter (and its base) across the rest, adding the scored errors to running
-    sums. The figures equal :func:`ekf_holdout`'s up to rounding
-    (``tests/estimation/test_holdout_observers.py``); nothing is kept a sample. ``unit`` and
-    ``timeline`` are the common signature of
+    """:func:`ekf_holdout` of a ``log`` that is never held whole: its rows are read
+    ``log.window`` at a time and the row before (from which the kernel propagates). The fit
+    carries the filter across the windows of the first part, adding each window's gated
+    innovations to running sums; the prediction carries the open-loop filter (and its base)
+    across the rest, adding the scored errors to running sums. The figures equal
+    :func:`ekf_holdout`'s up to rounding (``tests/estimation/test_holdout_observers.py``);
+    nothing is kept a sample. ``unit`` is in the common signature of
     :data:`estimation.registry.HOLDOUT_WINDOWS`'s functions (the unit is the output's)."""
     obs = get_spec(estimator).build(config)
     if not isinstance(obs, EkfObserver):
         raise ConfigError(f"{estimator!r} is not an EKF")
-    m, mask = _split(n, fraction, accept)
+    read, n, window = log.read, log.n, log.window
+    m, mask = _split(n, fraction, log.accept)
     settings = obs.settings
     used, primary = _ekf_outputs(settings)
 

@@ -179,14 +179,16 @@ class EstimatorSpec:
 
     @property
     def streams(self) -> bool:
-        """Its runs can read their log a window at a time: its estimator plans windows
-        (:meth:`~estimation.estimator.ChunkedEstimator.run_windows`) and its kind's check has
-        a windowed form (:data:`HOLDOUT_WINDOWS`; a spec's own ``holdout`` has none)."""
+        """Its runs can read their log a window at a time: its kind's check has a windowed
+        form (:data:`HOLDOUT_WINDOWS`; a spec's own ``holdout`` has none). They do when its
+        estimator plans windows too (``windowed``,
+        :meth:`~estimation.estimator.ChunkedEstimator.run_windows`)."""
         return self.holdout is None and self.kind in HOLDOUT_WINDOWS
 
     def holdout_check_windows(self) -> Callable[..., Any]:
         """:meth:`holdout_check` over a log never held whole (:data:`HOLDOUT_WINDOWS`), called
-        as ``f(name, config, read, n, *, unit, timeline, accept)``; only when it
+        as ``f(name, config, log, *, unit)`` with a
+        :class:`~estimation.estimator.LogWindows` ``log``; only when it
         :attr:`streams`."""
         if not self.streams:
             raise ConfigError(f"{self.name} runs read their log whole")

@@ -14,6 +14,7 @@ from app.domain import Dataset
 from app.errors import InvalidRequestError
 from app.io.errors import InputError
 from app.io.resample import Raster, parse_raster
+from estimation.estimator import ChunkedEstimator, Estimator
 from estimation.registry import EstimatorSpec
 
 MAX_VERSIONS = 1000  # persisted versions per run (each carries the map and estimator state)
@@ -29,15 +30,17 @@ class RunOptions:
     gates: list[dict[str, Any]]
 
 
-def streams_input(spec: EstimatorSpec, dataset: Dataset) -> bool:
+def streams_input(spec: EstimatorSpec, estimator: Estimator, dataset: Dataset) -> bool:
     """Whether a run reads its log a window at a time from the store, never whole
     (`docs/data-formats.md#streamed-runs`): when nothing in it needs the whole log — an
-    estimator that plans windows, with a windowed check
-    (:attr:`~estimation.registry.EstimatorSpec.streams`: every built-in one,
-    :meth:`~estimation.estimator.ChunkedEstimator.run_windows`) on a dense uploaded dataset
+    ``estimator`` that plans windows
+    (:meth:`~estimation.estimator.ChunkedEstimator.run_windows`), of a spec with a windowed
+    check (:attr:`~estimation.registry.EstimatorSpec.streams`): every built-in one, on a
+    dense uploaded dataset
     (no truth to score, nothing to resample). Its sample gates are scanned a window at a
     time too (:func:`app.runs.gates.scan_gates`)."""
-    return spec.streams and dataset.scenario is None and not dataset.recorded
+    windowed = isinstance(estimator, ChunkedEstimator) and estimator.windowed
+    return windowed and spec.streams and dataset.scenario is None and not dataset.recorded
 
 
 def run_raster(config: dict[str, Any]) -> Raster | None:

@@ -35,7 +35,7 @@ from app.io.payload import Truth
 from app.runs.gates import GateResult, cell_counts, nearest_cell
 from app.store.log_rows import LogRows, MemoryRows
 from estimation.errors import EstimationError
-from estimation.estimator import Estimator, Snapshot
+from estimation.estimator import Estimator, LogWindows, Snapshot
 from estimation.metrics import running_ise, score_run, torque_window
 from estimation.registry import EstimatorSpec
 from estimation.signals import Signals
@@ -407,15 +407,8 @@ class RunResults:
                 output = config.get("output", "")
                 unit = config.get("output_unit") or self.log.units.get(output, "")
                 check_windows = self.spec.holdout_check_windows()
-                result = check_windows(
-                    self.spec.name,
-                    config,
-                    self.log.rows,
-                    self.n,
-                    unit=unit,
-                    timeline=self.log.time,
-                    accept=accept,
-                )
+                log = LogWindows.over(self.log.rows, self.n, timeline=self.log.time, accept=accept)
+                result = check_windows(self.spec.name, config, log, unit=unit)
             else:
                 check = self.spec.holdout_check()
                 result = check(self.spec.name, config, self.signals, accept=accept)

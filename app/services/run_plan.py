@@ -292,6 +292,10 @@ def plan_run(
         parse_gates(options.gates, [c.name for c in dataset.channels], field="config.gates")
     model = _validate_config(spec, estimator_config)
     _check_delay(model, dataset, rows)
+    try:
+        estimator = spec.build(model)
+    except EstimationError as exc:
+        raise InvalidRequestError(" ".join(str(exc).split()), field="config") from exc
     prediction = None
     if limits is not None:
         cells, corners = spec.cost.size(model)
@@ -306,13 +310,9 @@ def plan_run(
             pace=options.pace,
             limits=limits,
             table_field="table.axes" if axes is not None else "config",
-            streamed=streams_input(spec, dataset),
+            streamed=streams_input(spec, estimator, dataset),
             gates=len(options.gates),
         )
-    try:
-        estimator = spec.build(model)
-    except EstimationError as exc:
-        raise InvalidRequestError(" ".join(str(exc).split()), field="config") from exc
     _check_required(estimator.required_signals(), dataset, request, spec)
     _check_units(spec, dataset, request)
     return RunPlan(

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from estimation.errors import ConfigError, ShapeError
-from estimation.estimator import WINDOW_STEPS, Chunk, ChunkedEstimator, WindowPlan
+from estimation.estimator import Chunk, ChunkedEstimator, LogWindows, WindowPlan
 from estimation.filters.config import (
     KfConfig,
     NlmsConfig,
@@ -153,22 +153,17 @@ class TableFilter(ChunkedEstimator[FilterState, Prepared]):
         period = signals.sample_period() if needs_period else None
         return resolve_settings(self.config, self.grid, sample_period_s=period)
 
-    def plan_windows(
-        self,
-        n: int,
-        timeline: Callable[[], np.ndarray],
-        read: Callable[[int, int], Signals],
-        accept: np.ndarray | None,
-        window: int = WINDOW_STEPS,
-    ) -> WindowPlan:
+    def plan_windows(self, log: LogWindows) -> WindowPlan:
         """A window of :meth:`run_windows` reads the τ rows after its last step, which its
         last measurements need (sensor delay); a delay in seconds is resolved, as by
-        :meth:`run`, on the whole log's sample period (``timeline()``)."""
-        settings = self.settings_on(n, timeline)
+        :meth:`run`, on the whole log's sample period (``log.timeline()``)."""
+        settings = self.settings_on(log.n, log.timeline)
         tau = settings.delay
-        if tau >= n:
-            raise ConfigError(f"sensor delay of {tau} samples is not shorter than the log ({n})")
-        return WindowPlan(steps=n - tau, extra_rows=tau, context=settings)
+        if tau >= log.n:
+            raise ConfigError(
+                f"sensor delay of {tau} samples is not shorter than the log ({log.n})"
+            )
+        return WindowPlan(steps=log.n - tau, extra_rows=tau, context=settings)
 
     def prepare_window(
         self,

@@ -50,7 +50,6 @@ Example
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -59,7 +58,7 @@ from pydantic import BaseModel
 
 from estimation import kernels
 from estimation.errors import ConfigError, ShapeError, StateError
-from estimation.estimator import WINDOW_STEPS, Chunk, ChunkedEstimator, WindowPlan
+from estimation.estimator import Chunk, ChunkedEstimator, LogWindows, WindowPlan
 from estimation.observers.ekf_config import (
     OUTPUT_NAMES,
     EkfAugConfig,
@@ -374,19 +373,12 @@ class EkfObserver(ChunkedEstimator[EkfState, EkfModel]):
     def prepare(self, signals: Signals, accept: np.ndarray | None = None) -> EkfModel:
         return prepare_model(signals, self.config, accept=accept)
 
-    def plan_windows(
-        self,
-        n: int,
-        timeline: Callable[[], np.ndarray],
-        read: Callable[[int, int], Signals],
-        accept: np.ndarray | None,
-        window: int = WINDOW_STEPS,
-    ) -> WindowPlan:
+    def plan_windows(self, log: LogWindows) -> WindowPlan:
         """Nothing of the whole log: each window reads the row before it, from which the
         kernel propagates its first sample."""
-        if n < 2:
-            raise ConfigError(f"the EKF needs at least two samples, got {n}")
-        return WindowPlan(steps=n, extra_rows=0, context=None, rows_before=1)
+        if log.n < 2:
+            raise ConfigError(f"the EKF needs at least two samples, got {log.n}")
+        return WindowPlan(steps=log.n, extra_rows=0, context=None, rows_before=1)
 
     def prepare_window(
         self, signals: Signals, accept: np.ndarray | None, offset: int, n: int, context: None

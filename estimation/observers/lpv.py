@@ -42,7 +42,6 @@ difference); ``"zero"`` sets ``E3 = 0`` and leaves it to the ω_t output injecti
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
 from typing import Any, Literal
 
 import numpy as np
@@ -50,7 +49,7 @@ from pydantic import BaseModel
 
 from estimation import kernels
 from estimation.errors import ConfigError, ShapeError
-from estimation.estimator import WINDOW_STEPS, Chunk, ChunkedEstimator, WindowPlan
+from estimation.estimator import Chunk, ChunkedEstimator, LogWindows, WindowPlan
 from estimation.observers.airpath_model import model_rho
 from estimation.observers.lmi import (
     DEFAULT_OUTPUT_SCALE,
@@ -164,24 +163,18 @@ class LpvObserver(ChunkedEstimator[LpvState, LpvPrepared]):
         rho = np.ascontiguousarray(signals.stack(self.rho_channels()))
         return rho, (signals[c.t_em] if c.t_em and c.t_em in signals else None)
 
-    def plan_windows(
-        self,
-        n: int,
-        timeline: Callable[[], np.ndarray],
-        read: Callable[[int, int], Signals],
-        accept: np.ndarray | None,
-        window: int = WINDOW_STEPS,
-    ) -> WindowPlan:
+    def plan_windows(self, log: LogWindows) -> WindowPlan:
         """A pass over the log a window at a time for what :meth:`prepare` takes from all of
         it (:class:`LpvBox`: 8 bytes a sample for the mean T_em, as ``np.mean`` sums it, and
-        the accept mask), ``window`` rows at a time; each window reads the row before it, for
-        ``ṗ_im``, ``h`` and ``Δω_t``."""
+        the accept mask), ``log.window`` rows at a time; each window reads the row before it,
+        for ``ṗ_im``, ``h`` and ``Δω_t``."""
+        n = log.n
         lo, hi = np.full(5, np.inf), np.full(5, -np.inf)
         t_em: np.ndarray | None = np.empty(n)
-        mask = np.ones(n, dtype=np.bool_) if accept is None else np.array(accept, dtype=bool)
-        for a in range(0, n, window):
+        mask = np.ones(n, dtype=np.bool_) if log.accept is None else np.array(log.accept, bool)
+        for a in range(0, n, log.window):
             lead = min(a, 1)
-            rows = read(a - lead, min(a + window, n))
+            rows = log.read(a - lead, min(a + log.window, n))
             rows.require(self.required_signals())
             rho, temperature = self._scheduling_rows(rows)
             rho = rho[lead:]

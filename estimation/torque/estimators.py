@@ -17,7 +17,6 @@ State is explicit (:class:`TorqueState`): frozen, serialisable, with the step co
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -25,7 +24,7 @@ import numpy as np
 
 from estimation import kernels
 from estimation.errors import ConfigError, ShapeError, StateError
-from estimation.estimator import WINDOW_STEPS, ChunkedEstimator, WindowPlan
+from estimation.estimator import ChunkedEstimator, LogWindows, WindowPlan
 from estimation.registry import Cost, EstimatorKind, EstimatorSpec, family
 from estimation.signals import Signals, uniform_period
 from estimation.state import EstimatorState
@@ -233,19 +232,12 @@ class TorqueEstimator(ChunkedEstimator[TorqueState, TorquePrepared]):
     def prepare(self, signals: Signals, accept: np.ndarray | None = None) -> TorquePrepared:
         return self._prepared(signals, accept, signals.sample_period())
 
-    def plan_windows(
-        self,
-        n: int,
-        timeline: Callable[[], np.ndarray],
-        read: Callable[[int, int], Signals],
-        accept: np.ndarray | None,
-        window: int = WINDOW_STEPS,
-    ) -> WindowPlan:
-        """Every window is prepared with the whole log's sample period (``timeline()``)."""
-        time = timeline()
-        if time.size != n:
-            raise ConfigError(f"the time column has {time.size} samples, the log {n}")
-        return WindowPlan(steps=n, extra_rows=0, context=uniform_period(time))
+    def plan_windows(self, log: LogWindows) -> WindowPlan:
+        """Every window is prepared with the whole log's sample period (``log.timeline()``)."""
+        time = log.timeline()
+        if time.size != log.n:
+            raise ConfigError(f"the time column has {time.size} samples, the log {log.n}")
+        return WindowPlan(steps=log.n, extra_rows=0, context=uniform_period(time))
 
     def prepare_window(
         self, signals: Signals, accept: np.ndarray | None, offset: int, n: int, context: float

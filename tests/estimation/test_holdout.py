@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from estimation.errors import ConfigError
+from estimation.estimator import LogWindows
 from estimation.holdout import holdout_error, holdout_error_windows
 from estimation.kernels.sensor import sensor_kernel
 from estimation.registry import get_spec
@@ -128,9 +129,8 @@ def test_the_windowed_holdout_is_the_whole_log_holdout(
         reads.append((a, z))
         return signals.slice(a, z)
 
-    windowed = holdout_error_windows(
-        kind, cfg, read, len(signals), unit="ppm", window=333, accept=accept
-    )
+    windows = LogWindows.over(read, len(signals), accept=accept, window=333)
+    windowed = holdout_error_windows(kind, cfg, windows, unit="ppm")
     assert windowed.scored == whole.scored
     np.testing.assert_array_equal(windowed.table.values, whole.table.values)
     assert windowed.metrics().keys() == whole.metrics().keys()

@@ -11,6 +11,7 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
 from estimation.errors import ConfigError
+from estimation.estimator import LogWindows
 from estimation.holdout import UNMEASURED_INPUT, unmeasured_input
 from estimation.holdout_observers import (
     ekf_holdout,
@@ -203,14 +204,15 @@ def test_the_ekf_check_a_window_at_a_time_is_the_whole_log_check(name, outputs, 
     whole = ekf_holdout(name, config, signals, accept=accept).metrics()
     read = Reader(signals)
     n = len(signals)
-    windowed = ekf_holdout_windows(name, config, read, n, window=40, accept=accept).metrics()
+    log = LogWindows.over(read, n, accept=accept, window=40)
+    windowed = ekf_holdout_windows(name, config, log).metrics()
     assert windowed.keys() == whole.keys()
     for key, value in whole.items():
         assert windowed[key] == pytest.approx(value, rel=1e-9, abs=1e-12), key
     assert whole["holdout:samples"] == np.count_nonzero(accept[round(0.7 * n) :])
     assert max(z - a for a, z in read.calls) <= 41
     with pytest.raises(ConfigError, match="too short"):
-        ekf_holdout_windows(name, config, read, 2)
+        ekf_holdout_windows(name, config, LogWindows.over(read, 2))
 
 
 def test_ekf_def_has_no_base_and_other_outputs_are_scored(short) -> None:
@@ -283,12 +285,13 @@ def test_the_lpv_check_a_window_at_a_time_is_the_whole_log_check(source: str) ->
     accept[330:345] = False  # in the held-out part
     whole = lpv_holdout("lpv", config, signals, accept=accept).metrics()
     read = Reader(signals)
-    windowed = lpv_holdout_windows("lpv", config, read, n, window=64, accept=accept).metrics()
+    log = LogWindows.over(read, n, accept=accept, window=64)
+    windowed = lpv_holdout_windows("lpv", config, log).metrics()
     assert windowed == whole
     assert whole["holdout:samples"] < n - round(0.7 * n)  # the gate's samples are not scored
     assert max(z - a for a, z in read.calls) <= 65
     with pytest.raises(ConfigError, match="too short"):
-        lpv_holdout_windows("lpv", config, read, 2)
+        lpv_holdout_windows("lpv", config, LogWindows.over(read, 2))
 
 
 def test_lpv_reports_output_error_statistics_and_says_nis_does_not_apply(lpv_log) -> None:

@@ -22,6 +22,7 @@ from estimation.holdout import holdout_error
 from estimation.holdout_observers import ekf_holdout, lpv_holdout
 from estimation.registry import get_spec
 from estimation.scenarios import get_scenario
+from estimation.signals import Signals
 from tests.support.helpers import (
     TABLE,
     TRUE_MAP,
@@ -593,6 +594,29 @@ def test_a_streamed_torque_run_stores_the_whole_log_runs_series(
     assert "holdout:not_applicable:unmeasured_input" in metrics
 
 
+SPEED_GATE = [{"type": "range", "channel": "speed_rpm", "max": 2000.0}]
+
+
+def _gated_scenario_run(
+    client: TestClient, tmp_path: Path, data: Any, name: str, config: dict[str, Any]
+) -> tuple[dict[str, Any], Signals, np.ndarray]:
+    """A run of ``name`` with :data:`SPEED_GATE` on a scenario's log uploaded as a CSV (so it
+    streams, docs/data-formats.md#streamed-runs): the finished run, the log as the server
+    parsed it, and the gate's accept mask."""
+    assert get_spec(name).streams
+    path = tmp_path / "log.csv"
+    write_csv(data.signals, path)
+    dataset = upload_ok(client, path.read_text())
+    body = {"dataset_id": dataset["id"], "estimator": name, "signals": {}}
+    run = start_run(client, body | {"config": config | {"gates": SPEED_GATE}})
+    done = wait_run(client, run["id"], timeout=300)
+    assert done["status"] == "succeeded", done["error"]
+    signals = read_csv(path).signals
+    accept = apply_gates(parse_gates(SPEED_GATE, signals.names), signals).accept
+    assert 0 < np.count_nonzero(~accept) < len(signals) // 2
+    return done, signals, accept
+
+
 @pytest.mark.slow
 def test_a_streamed_lpv_run_is_the_whole_log_fit_and_its_check(
     client: TestClient, tmp_path: Path
@@ -602,21 +626,10 @@ def test_a_streamed_lpv_run_is_the_whole_log_fit_and_its_check(
     its check refits and predicts a window at a time. With a gate, the final (smooth-filled)
     map is the whole-log fit's bit for bit, and the truth-free metrics are
     :func:`lpv_holdout`'s with the same mask."""
-    assert get_spec("lpv").streams
     scenario = get_scenario("maf-whtc")
     data = scenario.build(seed=6, duration_s=300.0, mismatch="nominal")
-    path = tmp_path / "whtc.csv"
-    write_csv(data.signals, path)
-    dataset = upload_ok(client, path.read_text())
     config = {**scenario.default_config("lpv", data), "fill": "smooth"}
-    gates = [{"type": "range", "channel": "speed_rpm", "max": 2000.0}]
-    body = {"dataset_id": dataset["id"], "estimator": "lpv", "signals": {}}
-    run = start_run(client, body | {"config": config | {"gates": gates}})
-    done = wait_run(client, run["id"], timeout=300)
-    assert done["status"] == "succeeded", done["error"]
-    signals = read_csv(path).signals
-    accept = apply_gates(parse_gates(gates, signals.names), signals).accept
-    assert 0 < np.count_nonzero(~accept) < len(signals) // 2
+    done, signals, accept = _gated_scenario_run(client, tmp_path, data, "lpv", config)
     fit = get_spec("lpv").build(config).fit(signals, accept=accept)
     assert fit.table is not None
     got = final_values(client, done["id"])["values"]
@@ -635,32 +648,22 @@ def test_a_streamed_ekf_run_is_the_whole_log_fit_and_its_check(
     reads the row before it, and its check refits and predicts a window at a time. With a
     gate, the final map or bias, the stored series and the diagnostics are the whole-log
     fit's bit for bit, and the truth-free metrics :func:`ekf_holdout`'s up to rounding."""
-    assert get_spec(name).streams
-    data = get_scenario("maf-1d-whtc").build(seed=4, duration_s=120.0, mismatch="nominal")
-    path = tmp_path / "whtc.csv"
-    write_csv(data.signals, path)
-    dataset = upload_ok(client, path.read_text())
-    config = get_scenario("maf-1d-whtc").default_config(name, data)
-    gates = [{"type": "range", "channel": "speed_rpm", "max": 2000.0}]
-    body = {"dataset_id": dataset["id"], "estimator": name, "signals": {}}
-    run = start_run(client, body | {"config": config | {"gates": gates}})
-    done = wait_run(client, run["id"], timeout=300)
-    assert done["status"] == "succeeded", done["error"]
-    signals = read_csv(path).signals
-    accept = apply_gates(parse_gates(gates, signals.names), signals).accept
-    assert 0 < np.count_nonzero(~accept) < len(signals) // 2
+    scenario = get_scenario("maf-1d-whtc")
+    data = scenario.build(seed=4, duration_s=120.0, mismatch="nominal")
+    config = scenario.default_config(name, data)
+    done, signals, accept = _gated_scenario_run(client, tmp_path, data, name, config)
     fit = get_spec(name).build(config).fit(signals, accept=accept)
     document = client.get(f"/api/runs/{done['id']}").json()
     if fit.table is not None:
         got = final_values(client, done["id"])["values"]
         np.testing.assert_array_equal(np.asarray(got), fit.table.values)
+    assert document["rejected"]["mask"] == fit.rejected["mask"]
     series = client.get(f"/api/runs/{done['id']}/series", params={"points": 4000}).json()
     stored = minmax_decimate(signals.time, fit.outputs, 4000)
     time, expected = minmax_decimate(*stored, 4000)
     assert series["time"] == time.tolist()
     for output, values in expected.items():
         assert series["series"][output]["values"] == values.tolist(), output
-    metrics = document["metrics"]
     check = ekf_holdout(name, config, signals, accept=accept).metrics()
     for key, value in check.items():
-        assert metrics[key] == pytest.approx(value, rel=1e-9, abs=1e-12), key
+        assert document["metrics"][key] == pytest.approx(value, rel=1e-9, abs=1e-12), key
