@@ -83,9 +83,10 @@ class Cost:
     prediction of the rest, made while the run's own data are still held; 0 for an estimator
     without one (the torque estimators)."""
     stream_sample_bytes: float = 0.0
-    """Bytes a sample of the whole log that a streamed run's truth-free check keeps beyond
-    the run's own (docs/reliability.md#admission): the LPV check's fit output error,
-    its mask and the scored prediction errors; 0 for a check that keeps only sums."""
+    """Bytes a sample of the whole log that a streamed run holds beyond its outputs, status
+    codes and final residual copy (docs/reliability.md#admission): the LPV check's fit output
+    error and its statistics' temporaries, what an EKF run's RSS was measured to keep; 0 for
+    the map filters and torque estimators, whose checks keep only sums."""
 
     def run_memory_bytes(self, cells: int, samples: int, *, corners: int = 1) -> int:
         """Predicted peak bytes of a service run: the run and its held-out refit beside it."""

@@ -11,6 +11,9 @@ as its air flow) as ``POST /api/runs`` would, and executes that run in a fresh w
 log (imports, JIT compilation, database connections), then resets its peak resident set
 (``/proc/self/clear_refs``) and executes the measured run: the printed growth is its peak
 ``VmHWM`` minus its ``VmRSS`` before the run, what the run itself needed at its largest.
+An air-path observer (``--estimator lpv``, ``ekf-aug``, ``ekf-map``) runs instead on 600 s of
+its scenario's log (``maf-whtc``, ``maf-1d-whtc``: every channel, ``--channels`` not used)
+repeated to ``ROWS`` at 10 Hz, with the scenario's config for it.
 ``--code DIR`` executes the worker from another checkout (e.g. ``git archive HEAD`` unpacked
 there), to compare before and after a change.
 """
@@ -37,6 +40,7 @@ from app.domain import Channel
 from app.services.run_plan import RunRequest
 from app.services.runs import RunService
 from app.store import open_store, save_staged, stage_signals
+from estimation.scenarios import get_scenario
 from estimation.signals import Signals
 from estimation.table import Axis, Table
 from tests.support.server import U1, U2, run_body
@@ -48,6 +52,8 @@ RATE_HZ = 100.0
 RANGE_GATE = {"type": "range", "channel": "u2", "max": 60.0}  # rejects about 7 %
 TORQUE_ESTIMATORS = ("uio", "smo", "dirty", "adaptive-const", "adaptive-tv")
 TORQUE_CHANNELS = {"speed_channel": "u1", "load_channel": "y"}  # an adaptive law's air: u2
+AIRPATH_SCENARIOS = {"lpv": "maf-whtc", "ekf-aug": "maf-1d-whtc", "ekf-map": "maf-1d-whtc"}
+AIRPATH_SECONDS = 600.0  # of the scenario's log, repeated to the rows asked for
 
 PEAK_HELPERS = """
 import gc
@@ -123,6 +129,17 @@ def wide_log(rows: int, channels: int, seed: int = 0) -> Signals:
     return Signals(np.arange(rows) / RATE_HZ, data, units, copy=False)
 
 
+def airpath_log(rows: int, estimator: str) -> tuple[Signals, dict[str, Any]]:
+    """:data:`AIRPATH_SECONDS` of ``estimator``'s scenario repeated to ``rows`` samples (the
+    time running on at the scenario's rate), and the scenario's config for ``estimator``."""
+    scenario = get_scenario(AIRPATH_SCENARIOS[estimator])
+    data = scenario.build(seed=0, duration_s=AIRPATH_SECONDS, mismatch="nominal")
+    log = data.signals
+    channels = {name: np.resize(log[name], rows) for name in log.names}
+    time = np.arange(rows) / scenario.rate_hz
+    return Signals(time, channels, log.units, copy=False), scenario.default_config(estimator, data)
+
+
 def _add_dataset(db: Database, store_url: str, signals: Signals, name: str) -> int:
     store = open_store(store_url)
     with stage_signals(store, signals) as staged, db.write() as s:
@@ -131,7 +148,7 @@ def _add_dataset(db: Database, store_url: str, signals: Signals, name: str) -> i
             name=name,
             source="csv",
             rows=len(signals),
-            rate_hz=RATE_HZ,
+            rate_hz=1.0 / float(signals.time[1] - signals.time[0]),
             duration_s=float(signals.time[-1] - signals.time[0]),
             time_column="time",
             channels=[Channel(n, signals.units.get(n, "")) for n in signals.names],
@@ -143,8 +160,11 @@ def _add_dataset(db: Database, store_url: str, signals: Signals, name: str) -> i
 def _add_run(db: Database, dataset_id: int, estimator: str, config: dict[str, Any]) -> int:
     """A run of ``estimator`` on the dataset with service ``config`` (e.g. its gates), planned
     and stored as ``POST /api/runs`` does it: a map filter over the 4×4 table with output
-    ``y``, a torque estimator with ``u1`` for its speed and ``y`` for its load."""
-    if estimator in TORQUE_ESTIMATORS:
+    ``y``, a torque estimator with ``u1`` for its speed and ``y`` for its load, an air-path
+    observer with its scenario's config (in ``config``)."""
+    if estimator in AIRPATH_SCENARIOS:
+        body = {"dataset_id": dataset_id, "estimator": estimator, "signals": {}, "config": config}
+    elif estimator in TORQUE_ESTIMATORS:
         air = {"air_channel": "u2"} if estimator.startswith("adaptive") else {}
         body = {
             "dataset_id": dataset_id,
@@ -174,8 +194,13 @@ def workbench(
     upgrade(database_url, store_url=store_url)
     db = Database(database_url)
     try:
-        warm = _add_dataset(db, store_url, wide_log(4000, channels, seed=1), "warm-up")
-        signals = wide_log(rows, channels)
+        if estimator in AIRPATH_SCENARIOS:
+            short, run_config = airpath_log(4000, estimator)
+            signals = airpath_log(rows, estimator)[0]
+            config = config | run_config
+        else:
+            short, signals = wide_log(4000, channels, seed=1), wide_log(rows, channels)
+        warm = _add_dataset(db, store_url, short, "warm-up")
         log_bytes = (len(signals.names) + 1) * len(signals) * 8
         measured = _add_dataset(db, store_url, signals, "wide")
         del signals
@@ -222,17 +247,20 @@ def main() -> None:
     parser.add_argument(
         "--estimator",
         default="skf",
-        choices=["skf", *TORQUE_ESTIMATORS],
-        help="skf on the 4×4 map, or a torque estimator (speed u1, load y, air u2)",
+        choices=["skf", *TORQUE_ESTIMATORS, *AIRPATH_SCENARIOS],
+        help="skf on the 4×4 map, a torque estimator (speed u1, load y, air u2), or an "
+        "air-path observer on its scenario's log",
     )
     args = parser.parse_args()
+    if args.gate and args.estimator in AIRPATH_SCENARIOS:
+        parser.error("--gate gates u2, which an air-path log does not have")
     config = {"gates": [RANGE_GATE]} if args.gate else {}
     with tempfile.TemporaryDirectory(prefix="mapwise-run-memory-") as tmp:
         bench = workbench(Path(tmp), args.rows, args.channels, config, args.estimator)
         peak = worker_peak(bench, args.code.resolve())
     print(
-        f"{args.rows} rows × {args.channels} channels ({bench.log_bytes / MIB:.0f} MiB as "
-        f"float64), {args.estimator} on {', '.join(USED)}{' gated' if args.gate else ''}: run "
+        f"{args.rows} rows ({bench.log_bytes / MIB:.0f} MiB as float64), {args.estimator}"
+        f"{' gated' if args.gate else ''}: run "
         f"{peak.status}, "
         "worker RSS "
         f"{peak.before_bytes / MIB:.0f} MiB before the run, peak {peak.peak_bytes / MIB:.0f} "

@@ -24,8 +24,8 @@ refit (``h = cost.holdout_passes``: 1, or 0 for an estimator without a truth-fre
 since the refit runs while the run's own data are held), and the dataset (its Parquet object
 as read from the artifact store, and the unpacked channels); a streamed run keeps only its
 per-sample outputs and status codes for the whole log, at its end the RMSE's copy of the
-accepted residuals, and what its truth-free check keeps a sample (``s =
-cost.stream_sample_bytes``: the LPV check's fit output error; 0 for a check of sums). A run
+accepted residuals, and what else it keeps a sample (``s =
+cost.stream_sample_bytes``: the LPV check's fit output error, an EKF's measured excess). A run
 with ``g`` sample gates holds ``(2 · g + 3) · n`` bytes more: each gate's mask and first-gate
 share, the accept mask and the first gate rejecting each sample (a streamed run scans its
 gates a window at a time, :func:`app.runs.gates.scan_gates`).

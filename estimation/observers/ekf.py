@@ -479,6 +479,11 @@ EKF_COST = Cost(
     ops_per_sample=lambda p, c: 4 * (p + 4) ** 3 + 500,
     max_cells=200,  # m³ per sample: a 200-value map is already ~3·10⁷ operations a sample
     size=_ekf_size,
+    # a streamed run's RSS grows by about 87 bytes a sample (ekf-aug, scripts/run_memory.py
+    # from 1 M to 2.6 M rows), 20 beyond its outputs, status codes and final residual copy:
+    # not itemised (the check keeps only sums), the allocator's; counted so as not to under-
+    # predict a long log (docs/benchmarks.md#run-memory)
+    stream_sample_bytes=32.0,
 )
 
 _spec = family(

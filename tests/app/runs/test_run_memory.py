@@ -45,22 +45,23 @@ def test_unread_channels_cost_a_run_no_memory(tmp_path: Path) -> None:
 @pytest.mark.slow
 @pytest.mark.parametrize(
     ("estimator", "gates", "keeps", "bound"),
-    [("skf", [], 17, 48), ("skf", [RANGE_GATE], 17, 48), ("uio", [], 9, 24)],
-    ids=["skf", "skf-gated", "uio"],
+    [("skf", [], 17, 48), ("skf", [RANGE_GATE], 17, 48), ("uio", [], 9, 24), ("lpv", [], 49, 130)],
+    ids=["skf", "skf-gated", "uio", "lpv"],
 )
 def test_a_streamed_run_holds_a_window_of_its_log_not_the_log(
     tmp_path: Path, estimator: str, gates: list[dict], keeps: int, bound: int
 ) -> None:
-    """A map filter or a torque estimator on an uploaded log reads it a window at a time
-    (WINDOW_STEPS rows, docs/data-formats.md#streamed-runs). From a log of 2 windows to one
-    of 10, the worker's peak grows by what it keeps per sample, ``keeps`` at least — a map
-    filter's prediction, residual and status code (17 bytes) and the final RMSE's copy of
-    the accepted residuals (8), with a sample gate its masks (5); a ``uio`` run's torque and
-    status code (9), and while it checks the sample period its time column and steps (16) —
-    not by the log's channels. A run holding its log whole grows by about 75 bytes a sample
-    (``skf``; 123 gated, 50 for ``uio``). Measured: ``skf`` 23.5 and 26 bytes a sample on a
-    quiet machine, the gated run 33 under the whole suite's load (more live ticks, each
-    allocating), hence its bound of 48; ``uio`` 11."""
+    """A run on an uploaded log reads it a window at a time (WINDOW_STEPS rows,
+    docs/data-formats.md#streamed-runs). From a log of 2 windows to one of 10, the worker's
+    peak grows by what it keeps per sample, ``keeps`` at least — a map filter's prediction,
+    residual and status code (17 bytes) and the final RMSE's copy of the accepted residuals
+    (8), with a sample gate its masks (5); a ``uio`` run's torque and status code (9), and
+    while it checks the sample period its time column and steps (16); the LPV observer's six
+    outputs and status code (49) and its check's fit output error (25) — not by the log's
+    channels. A run holding its log whole grows by about 75 bytes a sample (``skf``; 123
+    gated, 50 for ``uio``, 554 for ``lpv`` on its 19-channel log). Measured: ``skf`` 23.5 and
+    26 bytes a sample on a quiet machine, the gated run 33 under the whole suite's load (more
+    live ticks, each allocating), hence its bound of 48; ``uio`` 11; ``lpv`` 83."""
     growth, rows = {}, {}
     for windows in (2, 10):
         directory = tmp_path / f"w{windows}"
