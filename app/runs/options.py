@@ -30,16 +30,19 @@ class RunOptions:
     gates: list[dict[str, Any]]
 
 
-def streams_input(spec: EstimatorSpec, estimator: Estimator, dataset: Dataset) -> bool:
+def streams_input(
+    spec: EstimatorSpec, dataset: Dataset, estimator: Estimator | None = None
+) -> bool:
     """Whether a run reads its log a window at a time from the store, never whole
     (`docs/data-formats.md#streamed-runs`): when nothing in it needs the whole log — an
-    ``estimator`` that plans windows
-    (:meth:`~estimation.estimator.ChunkedEstimator.run_windows`), of a spec with a windowed
-    check (:attr:`~estimation.registry.EstimatorSpec.streams`): every built-in one, on a
-    dense uploaded dataset
+    estimator that plans windows
+    (:meth:`~estimation.estimator.ChunkedEstimator.run_windows`; ``None``: not built yet,
+    as its spec says), of a spec with a windowed check
+    (:attr:`~estimation.registry.EstimatorSpec.streams`): every built-in one, on a dense
+    uploaded dataset
     (no truth to score, nothing to resample). Its sample gates are scanned a window at a
     time too (:func:`app.runs.gates.scan_gates`)."""
-    windowed = isinstance(estimator, ChunkedEstimator) and estimator.windowed
+    windowed = estimator is None or (isinstance(estimator, ChunkedEstimator) and estimator.windowed)
     return windowed and spec.streams and dataset.scenario is None and not dataset.recorded
 
 

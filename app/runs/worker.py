@@ -152,7 +152,7 @@ class RunSession:
             names.append(raster.channel)
         store = open_store(self.ctx.store_url)
         known = [c.name for c in dataset.channels]
-        if streams_input(spec, self.estimator, dataset):
+        if streams_input(spec, dataset, self.estimator):
             rows = open_rows(store, loaded.samples, dataset.channels, names)
             log = self.closing.enter_context(rows)
             self.rate_hz = dataset.rate_hz

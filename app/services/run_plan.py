@@ -292,14 +292,12 @@ def plan_run(
         parse_gates(options.gates, [c.name for c in dataset.channels], field="config.gates")
     model = _validate_config(spec, estimator_config)
     _check_delay(model, dataset, rows)
-    try:
-        estimator = spec.build(model)
-    except EstimationError as exc:
-        raise InvalidRequestError(" ".join(str(exc).split()), field="config") from exc
-    prediction = None
-    if limits is not None:
+
+    def admitted(streamed: bool) -> Prediction | None:
+        if limits is None:
+            return None
         cells, corners = spec.cost.size(model)
-        prediction = admit_run(
+        return admit_run(
             spec,
             cells=cells,
             corners=corners,
@@ -310,9 +308,19 @@ def plan_run(
             pace=options.pace,
             limits=limits,
             table_field="table.axes" if axes is not None else "config",
-            streamed=streams_input(spec, estimator, dataset),
+            streamed=streamed,
             gates=len(options.gates),
         )
+
+    # Refused before the estimator is built (a huge table allocates); predicted as its spec
+    # streams, and again whole if the built estimator turns out not to plan windows.
+    prediction = admitted(streams_input(spec, dataset))
+    try:
+        estimator = spec.build(model)
+    except EstimationError as exc:
+        raise InvalidRequestError(" ".join(str(exc).split()), field="config") from exc
+    if streams_input(spec, dataset) and not streams_input(spec, dataset, estimator):
+        prediction = admitted(False)
     _check_required(estimator.required_signals(), dataset, request, spec)
     _check_units(spec, dataset, request)
     return RunPlan(
