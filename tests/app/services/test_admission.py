@@ -145,6 +145,24 @@ def test_a_streamed_run_is_predicted_from_its_window_and_its_outputs() -> None:
     )
 
 
+@pytest.mark.parametrize(("name", "cells", "kept"), [("lpv", 216, 25), ("ekf-map", 11, 32)])
+def test_a_streamed_observer_run_is_predicted_with_what_it_keeps_beyond_its_outputs(
+    name: str, cells: int, kept: int
+) -> None:
+    """The LPV check keeps its fit's output error (25 bytes a sample with its statistics'
+    temporaries); an EKF run was measured to keep 32 more than its outputs
+    (docs/benchmarks.md#run-memory): each sample of a streamed run costs
+    ``8 · outputs + 11 + stream_sample_bytes``."""
+    spec = get_spec(name)
+    assert spec.cost.stream_sample_bytes == kept
+    small, large = 2 * STREAM_ROWS, 3 * STREAM_ROWS  # both hold the same window
+    slope = (
+        _admit(name, cells, samples=large, streamed=True, corners=2).memory_bytes
+        - _admit(name, cells, samples=small, streamed=True, corners=2).memory_bytes
+    ) / STREAM_ROWS
+    assert slope == 8 * len(spec.output_units) + STREAM_SAMPLE_BYTES + kept
+
+
 def test_a_gated_run_is_predicted_with_its_masks() -> None:
     """Each sample gate keeps its mask and first-gate share for the whole log, and a gated
     run its accept mask and each sample's first rejecting gate: ``(2·g + 3)`` bytes a
