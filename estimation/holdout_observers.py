@@ -428,9 +428,11 @@ def ekf_holdout_windows(
     settings = obs.settings
     used, primary = _ekf_outputs(settings)
 
-    def window_model(a: int, z: int, keep: np.ndarray) -> EkfModel:
+    def window_model(a: int, z: int, keep: np.ndarray | None) -> EkfModel:
+        """Rows ``a … z−1`` and the row before; ``keep=None``: every sample masked."""
         first = a - min(a, 1)
-        return obs.prepare_window(read(first, z), keep[first:z], a, n, None)
+        accept = np.zeros(z - first, dtype=np.bool_) if keep is None else keep[first:z]
+        return obs.prepare_window(read(first, z), accept, a, n, None)
 
     nis = {j: InnovationSums() for j in used}
     state: EkfState | None = None
@@ -446,9 +448,8 @@ def ekf_holdout_windows(
     states = [state] if settings.mode == kern.MODE_DEF else [state, _reset(state, settings)]
     adapted = {j: ErrorSums() for j in used}
     base = ErrorSums()
-    masked = np.zeros(n, dtype=np.bool_)  # the prediction updates on nothing
     for a in range(m, n, window):
-        model = window_model(a, min(a + window, n), masked)
+        model = window_model(a, min(a + window, n), None)  # the prediction updates on nothing
         scored = mask[a : model.end]
         for i, start in enumerate(states):
             states[i], outputs, _ = ekf_run(start, model, settings, model.end)
