@@ -37,7 +37,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 from pydantic import BaseModel
@@ -137,6 +137,17 @@ class ObserverHoldout:
         }
 
 
+Obs = TypeVar("Obs", LpvObserver, EkfObserver)
+
+
+def _built(estimator: str, config: BaseModel | dict[str, Any], kind: type[Obs], noun: str) -> Obs:
+    """``estimator`` built from ``config``; a :class:`ConfigError` unless it is a ``kind``."""
+    obs = get_spec(estimator).build(config)
+    if not isinstance(obs, kind):
+        raise ConfigError(f"{estimator!r} is not {noun}")
+    return obs
+
+
 def _split(n: int, fraction: float, accept: np.ndarray | None) -> tuple[int, np.ndarray]:
     """The first held-out sample of a log of ``n`` samples and its accept mask (all: ``None``)."""
     m = split_point(n, fraction)
@@ -161,9 +172,7 @@ def lpv_holdout(
 ) -> ObserverHoldout:
     """Fit the LPV observer ``estimator`` on the first ``fraction`` of ``signals`` and score
     its frozen map, and the zero map, on the rest (module docstring)."""
-    obs = get_spec(estimator).build(config)
-    if not isinstance(obs, LpvObserver):
-        raise ConfigError(f"{estimator!r} is not the LPV observer")
+    obs = _built(estimator, config, LpvObserver, "the LPV observer")
     m, mask = _split(len(signals), fraction, accept)
     n = len(signals)
     c = obs.config
@@ -243,9 +252,7 @@ def lpv_holdout_windows(
     are kept, so the metrics are :func:`lpv_holdout`'s bit for bit
     (``tests/estimation/test_holdout_observers.py``). ``unit`` is in the common signature of
     :data:`estimation.registry.HOLDOUT_WINDOWS`'s functions: the MAF error is in kg/s."""
-    obs = get_spec(estimator).build(config)
-    if not isinstance(obs, LpvObserver):
-        raise ConfigError(f"{estimator!r} is not the LPV observer")
+    obs = _built(estimator, config, LpvObserver, "the LPV observer")
     read, n, window = log.read, log.n, log.window
     m, mask = _split(n, fraction, log.accept)
     c = obs.config
@@ -260,6 +267,7 @@ def lpv_holdout_windows(
     residual_stats = output_error_stats(residual, fit_accept)
     del residual, fit_accept  # held no longer than the fit's statistics need them
     observers = list(_frozen_states(state))
+    gains = {"gamma": c.gamma, "adaptation": c.adaptation}
     errors: list[list[np.ndarray]] = [[], []]  # the adapted and the base map's, scored
     for a in range(m, n, window):
         z = min(a + window, n)
@@ -268,7 +276,6 @@ def lpv_holdout_windows(
         frozen = dataclasses.replace(_frozen(prep, state, rows[c.fuel_flow]), offset=a - 1)
         y, scored = rows[c.maf][1:], prep.accept[1:]
         for i, observer in enumerate(observers):
-            gains = {"gamma": c.gamma, "adaptation": c.adaptation}
             observers[i], _, wc, dwc = lpv_run(observer, frozen, a, z, **gains)
             errors[i].append((y - (wc + dwc))[scored])
     adapted, base = np.concatenate(errors[0]), np.concatenate(errors[1])
@@ -335,9 +342,7 @@ def ekf_holdout(
 ) -> ObserverHoldout:
     """Fit EKF ``estimator`` on the first ``fraction`` of ``signals``, with its NIS, and
     score its open-loop prediction with frozen parameters on the rest (module docstring)."""
-    obs = get_spec(estimator).build(config)
-    if not isinstance(obs, EkfObserver):
-        raise ConfigError(f"{estimator!r} is not an EKF")
+    obs = _built(estimator, config, EkfObserver, "an EKF")
     m, mask = _split(len(signals), fraction, accept)
     n = len(signals)
     settings = obs.settings
@@ -420,9 +425,7 @@ def ekf_holdout_windows(
     :func:`ekf_holdout`'s up to rounding (``tests/estimation/test_holdout_observers.py``);
     nothing is kept a sample. ``unit`` is in the common signature of
     :data:`estimation.registry.HOLDOUT_WINDOWS`'s functions (the unit is the output's)."""
-    obs = get_spec(estimator).build(config)
-    if not isinstance(obs, EkfObserver):
-        raise ConfigError(f"{estimator!r} is not an EKF")
+    obs = _built(estimator, config, EkfObserver, "an EKF")
     read, n, window = log.read, log.n, log.window
     m, mask = _split(n, fraction, log.accept)
     settings = obs.settings

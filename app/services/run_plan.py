@@ -314,12 +314,13 @@ def plan_run(
 
     # Refused before the estimator is built (a huge table allocates); predicted as its spec
     # streams, and again whole if the built estimator turns out not to plan windows.
-    prediction = admitted(streams_input(spec, dataset))
+    spec_streams = streams_input(spec, dataset)
+    prediction = admitted(spec_streams)
     try:
         estimator = spec.build(model)
     except EstimationError as exc:
         raise InvalidRequestError(" ".join(str(exc).split()), field="config") from exc
-    if streams_input(spec, dataset) and not streams_input(spec, dataset, estimator):
+    if spec_streams and not streams_input(spec, dataset, estimator):
         prediction = admitted(False)
     _check_required(estimator.required_signals(), dataset, request, spec)
     _check_units(spec, dataset, request)
