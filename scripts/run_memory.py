@@ -13,7 +13,9 @@ log (imports, JIT compilation, database connections), then resets its peak resid
 ``VmHWM`` minus its ``VmRSS`` before the run, what the run itself needed at its largest.
 An air-path observer (``--estimator lpv``, ``ekf-aug``, ``ekf-map``) runs instead on 600 s of
 its scenario's log (``maf-whtc``, ``maf-1d-whtc``: every channel, ``--channels`` not used)
-repeated to ``ROWS`` at 10 Hz, with the scenario's config for it.
+repeated to ``ROWS`` at 10 Hz, with the scenario's config for it. ``--recorded`` stores the
+wide log as recorded (docs/data-formats.md#multi-rate): ``u1`` on its own jittered timestamps
+at twice the rate, the other channels on theirs, so the run puts them on the raster of ``y``.
 ``--code DIR`` executes the worker from another checkout (e.g. ``git archive HEAD`` unpacked
 there), to compare before and after a change.
 """
@@ -26,7 +28,7 @@ import os
 import subprocess
 import sys
 import tempfile
-from dataclasses import dataclass
+from dataclasses import astuple, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -37,9 +39,10 @@ from app.db.engine import Database
 from app.db.migrate import upgrade
 from app.db.repositories import DatasetRepo
 from app.domain import Channel
+from app.io.resample import Track, span_of
 from app.services.run_plan import RunRequest
 from app.services.runs import RunService
-from app.store import open_store, save_staged, stage_signals
+from app.store import open_store, save_staged, stage_recorded, stage_signals
 from estimation.scenarios import get_scenario
 from estimation.signals import Signals
 from estimation.table import Axis, Table
@@ -140,9 +143,31 @@ def airpath_log(rows: int, estimator: str) -> tuple[Signals, dict[str, Any]]:
     return Signals(time, channels, log.units, copy=False), scenario.default_config(estimator, data)
 
 
-def _add_dataset(db: Database, store_url: str, signals: Signals, name: str) -> int:
+def recorded_tracks(signals: Signals, seed: int = 0) -> list[Track]:
+    """The wide log as channels recorded on their own timestamps: ``u1`` at twice the rate
+    on jittered timestamps (each value held for two of them), the others on the log's."""
+    rng = np.random.default_rng(seed)
+    step = float(signals.time[1] - signals.time[0]) / 2.0
+    fast = signals.time[0] + step * (np.arange(2 * len(signals)) + rng.uniform(-0.2, 0.2))
+    tracks = [Track("u1", signals.units["u1"], fast, np.repeat(signals["u1"], 2), False)]
+    for name in signals.names[1:]:
+        tracks.append(Track(name, signals.units.get(name, ""), signals.time, signals[name], False))
+    return tracks
+
+
+def _add_dataset(
+    db: Database, store_url: str, signals: Signals, name: str, recorded: bool = False
+) -> int:
     store = open_store(store_url)
-    with stage_signals(store, signals) as staged, db.write() as s:
+    channels = [Channel(n, signals.units.get(n, "")) for n in signals.names]
+    if recorded:
+        tracks = recorded_tracks(signals)
+        staging = stage_recorded(store, tracks, dict(signals.units))
+        spans = {t.name: span_of(t) for t in tracks}
+        channels = [replace(c, timing=astuple(spans[c.name])[1:]) for c in channels]
+    else:
+        staging = stage_signals(store, signals)
+    with staging as staged, db.write() as s:
         repo = DatasetRepo(s)
         dataset = repo.add(
             name=name,
@@ -151,7 +176,7 @@ def _add_dataset(db: Database, store_url: str, signals: Signals, name: str) -> i
             rate_hz=1.0 / float(signals.time[1] - signals.time[0]),
             duration_s=float(signals.time[-1] - signals.time[0]),
             time_column="time",
-            channels=[Channel(n, signals.units.get(n, "")) for n in signals.names],
+            channels=channels,
         )
         repo.attach_samples(dataset.id, save_staged(store, dataset.id, staged), staged.sha256)
         return dataset.id
@@ -185,9 +210,11 @@ def workbench(
     channels: int,
     config: dict[str, Any] | None = None,
     estimator: str = "skf",
+    recorded: bool = False,
 ) -> Workbench:
     """The database (SQLite) and store under ``directory``, with both runs of ``estimator``
-    queued (with the run config ``config``, e.g. ``{"gates": [...]}``)."""
+    queued (with the run config ``config``, e.g. ``{"gates": [...]}``), on datasets stored
+    as recorded with ``recorded`` (:func:`recorded_tracks`)."""
     config = config or {}
     database_url = f"sqlite:///{directory / 'mapwise.db'}"
     store_url = (directory / "store").as_uri()
@@ -200,9 +227,9 @@ def workbench(
             config = config | run_config
         else:
             short, signals = wide_log(4000, channels, seed=1), wide_log(rows, channels)
-        warm = _add_dataset(db, store_url, short, "warm-up")
+        warm = _add_dataset(db, store_url, short, "warm-up", recorded)
         log_bytes = (len(signals.names) + 1) * len(signals) * 8
-        measured = _add_dataset(db, store_url, signals, "wide")
+        measured = _add_dataset(db, store_url, signals, "wide", recorded)
         del signals
         return Workbench(
             database_url,
@@ -251,16 +278,23 @@ def main() -> None:
         help="skf on the 4×4 map, a torque estimator (speed u1, load y, air u2), or an "
         "air-path observer on its scenario's log",
     )
+    parser.add_argument(
+        "--recorded",
+        action="store_true",
+        help="store the log as recorded, u1 at twice the rate (module docstring)",
+    )
     args = parser.parse_args()
-    if args.gate and args.estimator in AIRPATH_SCENARIOS:
-        parser.error("--gate gates u2, which an air-path log does not have")
+    if (args.gate or args.recorded) and args.estimator in AIRPATH_SCENARIOS:
+        parser.error("--gate and --recorded apply to the wide log, not an air-path log")
     config = {"gates": [RANGE_GATE]} if args.gate else {}
     with tempfile.TemporaryDirectory(prefix="mapwise-run-memory-") as tmp:
-        bench = workbench(Path(tmp), args.rows, args.channels, config, args.estimator)
+        bench = workbench(
+            Path(tmp), args.rows, args.channels, config, args.estimator, args.recorded
+        )
         peak = worker_peak(bench, args.code.resolve())
     print(
         f"{args.rows} rows ({bench.log_bytes / MIB:.0f} MiB as float64), {args.estimator}"
-        f"{' gated' if args.gate else ''}: run "
+        f"{' gated' if args.gate else ''}{' as recorded' if args.recorded else ''}: run "
         f"{peak.status}, "
         "worker RSS "
         f"{peak.before_bytes / MIB:.0f} MiB before the run, peak {peak.peak_bytes / MIB:.0f} "

@@ -168,34 +168,15 @@ def resample(
             notes,
         )
     by_name = {t.name: t for t in usable}
-    if raster.channel is not None and raster.channel not in by_name:
-        raise InputError(
-            f"raster channel {raster.channel!r} is not among the kept channels with usable "
-            f"samples: {list(by_name)[:50]}",
-            field=RASTER_FIELD,
-        )
     valid_times = {t.name: t.time[t.valid] for t in usable}
-    start = max(float(v[0]) for v in valid_times.values())
-    stop = min(float(v[-1]) for v in valid_times.values())
-    if start >= stop:
-        raise InputError(
-            "the channels' time ranges do not overlap (valid samples of every kept channel "
-            f"span {start:g}–{stop:g} s)",
-            field="file",
-        )
-    if raster.step is None and raster.channel is None:
-        slowest = max(usable, key=lambda t: _median_step(t.time))
-        raster = Raster(channel=slowest.name)
+    start, stop, raster = plan_span([span_of(t) for t in usable], raster)
     if raster.step is not None:
-        # a float count: the count of a tiny step overflows an int (and is refused)
-        rows = float(np.floor((stop - start) / raster.step * (1 + 1e-12))) + 1
-        _check_size(rows, len(usable), raster, max_rows, max_values)
-        time = start + raster.step * np.arange(int(rows), dtype=np.float64)
+        time = rate_grid(start, stop, raster.step, len(usable), max_rows, max_values)
     else:
         own = by_name[raster.channel].time  # type: ignore[index]
         time = own[(own >= start) & (own <= stop)]
-        _check_size(time.size, len(usable), raster, max_rows, max_values)
-    channels = {t.name: _on_grid(t, valid_times[t.name], time) for t in usable}
+        check_size(time.size, len(usable), raster, max_rows, max_values)
+    channels = {t.name: on_grid(t, valid_times[t.name], time) for t in usable}
     held = [t.name for t in usable if t.hold]
     smooth = [t.name for t in usable if not t.hold]
     notes.append(
@@ -211,6 +192,59 @@ def resample(
         )
     )
     return Resampled(time, channels, {t.name: t.unit for t in usable}, masked, notes, raster)
+
+
+@dataclass(frozen=True, slots=True)
+class Span:
+    """What the raster rules need of a usable channel: its first and last valid time and
+    its median time step (s)."""
+
+    name: str
+    start: float
+    stop: float
+    step: float
+
+
+def span_of(track: Track) -> Span:
+    """The span of a track with at least two valid samples."""
+    valid = track.time[track.valid]
+    return Span(track.name, float(valid[0]), float(valid[-1]), _median_step(track.time))
+
+
+def plan_span(spans: Sequence[Span], raster: Raster) -> tuple[float, float, Raster]:
+    """The span every channel covers with valid samples, ``[max start, min stop]``, and the
+    raster to put them on: ``raster``, or by default that of the slowest channel (largest
+    median step, the first on a tie). 422 for a raster channel not among ``spans`` or for
+    spans that do not overlap."""
+    names = [s.name for s in spans]
+    if raster.channel is not None and raster.channel not in names:
+        raise InputError(
+            f"raster channel {raster.channel!r} is not among the kept channels with usable "
+            f"samples: {names[:50]}",
+            field=RASTER_FIELD,
+        )
+    start = max(s.start for s in spans)
+    stop = min(s.stop for s in spans)
+    if start >= stop:
+        raise InputError(
+            "the channels' time ranges do not overlap (valid samples of every kept channel "
+            f"span {start:g}–{stop:g} s)",
+            field="file",
+        )
+    if raster.step is None and raster.channel is None:
+        raster = Raster(channel=max(spans, key=lambda s: s.step).name)
+    return start, stop, raster
+
+
+def rate_grid(
+    start: float, stop: float, step: float, channels: int, max_rows: int, max_values: int
+) -> np.ndarray:
+    """``start + step·k`` for every ``k`` up to ``stop``, refused before it is allocated
+    when it exceeds ``max_rows`` rows or ``max_values`` values over ``channels``."""
+    # a float count: the count of a tiny step overflows an int (and is refused)
+    rows = float(np.floor((stop - start) / step * (1 + 1e-12))) + 1
+    check_size(rows, channels, Raster(step=step), max_rows, max_values)
+    return start + step * np.arange(int(rows), dtype=np.float64)
 
 
 def _usable(tracks: Sequence[Track], notes: list[str]) -> list[Track]:
@@ -259,7 +293,7 @@ def _median_step(time: np.ndarray) -> float:
     return float(np.median(np.diff(time)))
 
 
-def _on_grid(track: Track, valid_time: np.ndarray, grid: np.ndarray) -> np.ndarray:
+def on_grid(track: Track, valid_time: np.ndarray, grid: np.ndarray) -> np.ndarray:
     """``track`` at the grid times from its valid samples: previous value or linear."""
     values = track.values[track.valid]
     if track.hold:
@@ -268,7 +302,7 @@ def _on_grid(track: Track, valid_time: np.ndarray, grid: np.ndarray) -> np.ndarr
     return np.interp(grid, valid_time, values)
 
 
-def _check_size(rows: float, channels: int, raster: Raster, max_rows: int, max_values: int) -> None:
+def check_size(rows: float, channels: int, raster: Raster, max_rows: int, max_values: int) -> None:
     if not (rows <= max_rows and rows * channels <= max_values):  # also refuses inf
         shown = f"{int(rows)}" if np.isfinite(rows) and rows < 1e15 else f"{rows:.3g}"
         raise InputError(

@@ -38,12 +38,13 @@ def streams_input(
     estimator that plans windows
     (:meth:`~estimation.estimator.ChunkedEstimator.run_windows`; ``None``: not built yet,
     as its spec says), of a spec with a windowed check
-    (:attr:`~estimation.registry.EstimatorSpec.streams`): every built-in one, on a dense
-    uploaded dataset
-    (no truth to score, nothing to resample). Its sample gates are scanned a window at a
-    time too (:func:`app.runs.gates.scan_gates`)."""
+    (:attr:`~estimation.registry.EstimatorSpec.streams`): every built-in one, on an
+    uploaded dataset, dense or stored as recorded (put on its raster a window at a time,
+    :class:`~app.store.raster_rows.RasterRows`); a simulated one is read whole, as its truth
+    is scored on the whole log. Its sample gates are scanned a window at a time too
+    (:func:`app.runs.gates.scan_gates`)."""
     windowed = estimator is None or (isinstance(estimator, ChunkedEstimator) and estimator.windowed)
-    return windowed and spec.streams and dataset.scenario is None and not dataset.recorded
+    return windowed and spec.streams and dataset.scenario is None
 
 
 def run_raster(config: dict[str, Any]) -> Raster | None:

@@ -37,6 +37,7 @@ from app.runs.options import run_options, run_raster, streams_input
 from app.runs.results import RunResults, channels_read
 from app.store import load_on_raster, open_store
 from app.store.log_rows import open_rows
+from app.store.raster_rows import RasterRows
 from estimation.estimator import ChunkedEstimator, Snapshot
 from estimation.registry import get_spec, load_state
 
@@ -153,9 +154,12 @@ class RunSession:
         store = open_store(self.ctx.store_url)
         known = [c.name for c in dataset.channels]
         if streams_input(spec, dataset, self.estimator):
-            rows = open_rows(store, loaded.samples, dataset.channels, names)
+            rows = open_rows(store, loaded.samples, dataset.channels, names, raster=raster)
             log = self.closing.enter_context(rows)
             self.rate_hz = dataset.rate_hz
+            if isinstance(log, RasterRows):  # stored as recorded: the rate of its raster
+                self.raster_s = log.step_s
+                self.rate_hz = dataset.rate_hz if log.step_s is None else 1.0 / log.step_s
             self.options = run_options(
                 self.run.config, log.n, self.rate_hz, self.ctx.version_fraction
             )

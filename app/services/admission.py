@@ -12,12 +12,12 @@ The predicted memory of a run is::
 
     WORKER_BASE_BYTES + (1 + h) · cost.memory_bytes(p, n, c) + 2 · 8 · channels · n
 
-and of a streamed run (any estimator on an uploaded dense log, reading it a window at a
-time from the store, :func:`app.runs.options.streams_input`), with
+and of a streamed run (any estimator on an uploaded log, reading it a window at a time from
+the store, :func:`app.runs.options.streams_input`), with
 ``w = min(n, STREAM_ROWS)`` the rows it holds::
 
     WORKER_BASE_BYTES + (1 + h) · cost.memory_bytes(p, w, c) + 2 · 8 · channels · w
-        + (8 · outputs + 11 + s) · n
+        + (8 · outputs + 11 + s + 8 · r) · n
 
 the worker process itself, the estimator's declared cost for the run and for its held-out
 refit (``h = cost.holdout_passes``: 1, or 0 for an estimator without a truth-free check,
@@ -25,7 +25,8 @@ since the refit runs while the run's own data are held), and the dataset (its Pa
 as read from the artifact store, and the unpacked channels); a streamed run keeps only its
 per-sample outputs and status codes for the whole log, at its end the RMSE's copy of the
 accepted residuals, and what else it keeps a sample (``s =
-cost.stream_sample_bytes``: the LPV check's fit output error, an EKF's measured excess). A run
+cost.stream_sample_bytes``: the LPV check's fit output error, an EKF's measured excess), and
+on a dataset stored as recorded (``r = 1``) its raster's time column. A run
 with ``g`` sample gates holds ``(2 · g + 3) · n`` bytes more: each gate's mask and first-gate
 share, the accept mask and the first gate rejecting each sample (a streamed run scans its
 gates a window at a time, :func:`app.runs.gates.scan_gates`).
@@ -154,6 +155,7 @@ def admit_run(
     table_field: str = "table.axes",
     streamed: bool = False,
     gates: int = 0,
+    raster: bool = False,
 ) -> Prediction:
     """Check a planned run against ``limits``; an :class:`OverBudgetError` naming the field
     to change if it does not fit, else the predicted figures."""
@@ -163,6 +165,8 @@ def admit_run(
     data = FLOAT_BYTES * 2 * channels * held
     if streamed:
         per_sample = FLOAT_BYTES * len(spec.output_units) + STREAM_SAMPLE_BYTES
+        if raster:  # stored as recorded: the raster's time column (app.store.raster_rows)
+            per_sample += FLOAT_BYTES
         data += int((per_sample + cost.stream_sample_bytes) * samples)
     if gates:
         data += (GATE_MASK_BYTES * gates + GATES_SAMPLE_BYTES) * samples

@@ -31,6 +31,7 @@ from app.io.errors import too_large
 from app.io.ingest import IngestLimits, ParsedLog, detect_format, ingest
 from app.io.names import check_name, without_refused
 from app.io.payload import pack_truth
+from app.io.resample import span_of
 from app.services.admission import human_bytes
 from app.services.dataset_child import DatasetChild, SimulationRequest, WholeUpload
 from app.store import (
@@ -101,14 +102,11 @@ def _dataset_name(name: str | None, filename: str | None, fallback: str) -> str:
 
 def _timing(parsed: ParsedLog) -> dict[str, tuple[float, float, float]]:
     """Per channel stored as recorded: its first and last valid time and its median time
-    step (the resample rule's, :func:`app.io.resample.resample`), so a run's rows and rate
-    are known before its samples are read (:meth:`Dataset.rows_for`)."""
-    timing = {}
-    for track in parsed.recorded:
-        valid = track.time[track.valid]
-        step = float(np.median(np.diff(track.time)))
-        timing[track.name] = (float(valid[0]), float(valid[-1]), step)
-    return timing
+    step (:func:`app.io.resample.span_of`, the resample rule's), so a run's rows and rate
+    are known before its samples are read (:meth:`Dataset.rows_for`) and a streamed run
+    can plan its raster without a pass over them (:mod:`app.store.raster_rows`)."""
+    spans = (span_of(track) for track in parsed.recorded)
+    return {s.name: (s.start, s.stop, s.step) for s in spans}
 
 
 def _add_streamed(repo: DatasetRepo, name: str, streamed: StreamedCsv) -> Dataset:

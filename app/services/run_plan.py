@@ -310,6 +310,7 @@ def plan_run(
             table_field="table.axes" if axes is not None else "config",
             streamed=streamed,
             gates=len(options.gates),
+            raster=dataset.recorded,
         )
 
     # Refused before the estimator is built (a huge table allocates); predicted as its spec

@@ -5,8 +5,9 @@ Parquet object (:mod:`app.store.parquet_signals`) a row group at a time, only th
 the run uses, and keeps the last :data:`CACHED_GROUPS` groups decoded, so a streamed run
 (`docs/data-formats.md#streamed-runs`) holds a window of the log, never the whole of it;
 the live view and the stored series read the rows the estimator has just read from that
-cache. :func:`open_rows` checks the object's hash first (:func:`open_verified`) and keeps
-its handle open while the run reads.
+cache; :class:`~app.store.raster_rows.RasterRows` does the same for a dataset stored as
+recorded, on a raster. :func:`open_rows` checks the object's hash first
+(:func:`open_verified`) and keeps its handle open while the run reads.
 """
 
 from __future__ import annotations
@@ -21,10 +22,14 @@ import pyarrow as pa
 
 from app.domain import Channel, StoredSamples
 from app.io.arrow_arrays import float64_values
+from app.io.errors import InputError
+from app.io.ingest import IngestLimits
+from app.io.resample import Raster, Span
 from app.store.datasets import open_signals
 from app.store.errors import ArtifactCorruptError
 from app.store.objects import ArtifactStore
 from app.store.parquet_signals import SignalsFile
+from app.store.raster_rows import RasterRows
 from estimation.signals import Signals
 
 CACHED_GROUPS = 8  # 8 × 65 536 rows of the channels read: 16 MiB for time and three channels
@@ -134,10 +139,32 @@ def open_rows(
     stored: StoredSamples,
     channels: Sequence[Channel],
     names: Collection[str],
-) -> Iterator[StoredRows]:
-    """The dense dataset's object as :class:`StoredRows` of the channels ``names`` (those it
-    has), its hash checked first and its channels those of the dataset's row
-    (:func:`open_signals`)."""
+    *,
+    raster: Raster | None = None,
+) -> Iterator[StoredRows | RasterRows]:
+    """The dataset's object as rows of the channels ``names`` (those it has), its hash
+    checked first and its channels those of the dataset's row (:func:`open_signals`):
+    :class:`StoredRows` for a dense dataset, :class:`~app.store.raster_rows.RasterRows` on
+    ``raster`` (default: the slowest channel's) for one stored as recorded, whose
+    :class:`~app.io.errors.InputError` names the dataset as :func:`load_on_raster`'s does."""
     expect = [c.name for c in channels]
+    units = {c.name: c.unit for c in channels}
     with open_signals(store, stored.dataset_id, stored.key, stored.sha256, expect=expect) as file:
-        yield StoredRows(file, list(names), {c.name: c.unit for c in channels})
+        if not file.recorded:
+            yield StoredRows(file, list(names), units)
+            return
+        spans = {c.name: Span(c.name, *c.timing) for c in channels if c.timing is not None}
+        limits = IngestLimits()
+        try:
+            rows = RasterRows(
+                file,
+                list(names),
+                units,
+                spans,
+                raster,
+                max_rows=limits.max_rows,
+                max_values=limits.max_values,
+            )
+        except InputError as exc:
+            raise InputError(f"dataset {stored.dataset_id}: {exc}", field=exc.field) from None
+        yield rows

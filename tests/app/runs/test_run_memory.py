@@ -44,12 +44,18 @@ def test_unread_channels_cost_a_run_no_memory(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 @pytest.mark.parametrize(
-    ("estimator", "gates", "keeps", "bound"),
-    [("skf", [], 17, 48), ("skf", [RANGE_GATE], 17, 48), ("uio", [], 9, 24), ("lpv", [], 49, 130)],
-    ids=["skf", "skf-gated", "uio", "lpv"],
+    ("estimator", "gates", "keeps", "bound", "recorded"),
+    [
+        ("skf", [], 17, 48, False),
+        ("skf", [RANGE_GATE], 17, 48, False),
+        ("uio", [], 9, 24, False),
+        ("lpv", [], 49, 130, False),
+        ("skf", [], 25, 56, True),
+    ],
+    ids=["skf", "skf-gated", "uio", "lpv", "skf-recorded"],
 )
 def test_a_streamed_run_holds_a_window_of_its_log_not_the_log(
-    tmp_path: Path, estimator: str, gates: list[dict], keeps: int, bound: int
+    tmp_path: Path, estimator: str, gates: list[dict], keeps: int, bound: int, recorded: bool
 ) -> None:
     """A run on an uploaded log reads it a window at a time (WINDOW_STEPS rows,
     docs/data-formats.md#streamed-runs). From a log of 2 windows to one of 10, the worker's
@@ -57,17 +63,19 @@ def test_a_streamed_run_holds_a_window_of_its_log_not_the_log(
     residual and status code (17 bytes) and the final RMSE's copy of the accepted residuals
     (8), with a sample gate its masks (5); a ``uio`` run's torque and status code (9), and
     while it checks the sample period its time column and steps (16); the LPV observer's six
-    outputs and status code (49) and its check's fit output error (25) — not by the log's
-    channels. A run holding its log whole grows by about 75 bytes a sample (``skf``; 123
-    gated, 50 for ``uio``, 554 for ``lpv`` on its 19-channel log). Measured: ``skf`` 23.5 and
-    26 bytes a sample on a quiet machine, the gated run 33 under the whole suite's load (more
-    live ticks, each allocating), hence its bound of 48; ``uio`` 11; ``lpv`` 83."""
+    outputs and status code (49) and its check's fit output error (25); on a dataset stored
+    as recorded, ``u1`` at twice the rate on its own timestamps, the raster's time column (8)
+    besides — not by the log's channels. A run holding its log whole grows by about 75 bytes
+    a sample (``skf``; 123 gated, 50 for ``uio``, 554 for ``lpv`` on its 19-channel log, 173
+    for ``skf`` on the recorded one). Measured: ``skf`` 23.5 and 26 bytes a sample on a quiet
+    machine, the gated run 33 under the whole suite's load (more live ticks, each
+    allocating), hence its bound of 48; ``uio`` 11; ``lpv`` 83; ``skf`` as recorded 28."""
     growth, rows = {}, {}
     for windows in (2, 10):
         directory = tmp_path / f"w{windows}"
         directory.mkdir()
         rows[windows] = windows * WINDOW_STEPS
-        bench = workbench(directory, rows[windows], NARROW, {"gates": gates}, estimator)
+        bench = workbench(directory, rows[windows], NARROW, {"gates": gates}, estimator, recorded)
         peak = worker_peak(bench, timeout_s=300)
         assert peak.status == "succeeded"
         growth[windows] = peak.growth_bytes

@@ -12,11 +12,27 @@ import io
 import warnings
 from pathlib import Path
 
+import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from tests.support.helpers import log_csv, run_body, start_run, upload, upload_ok, wait_run
+from app.io.ingest import IngestLimits, ingest
+from app.io.resample import Raster, resample
+from estimation.estimator import WINDOW_STEPS
+from estimation.holdout import holdout_error
+from estimation.registry import get_spec
+from estimation.signals import Signals
+from tests.support.helpers import (
+    final_values,
+    log_csv,
+    run_body,
+    start_run,
+    upload,
+    upload_ok,
+    wait_run,
+)
 from tests.support.measurements import NMOT, POLE, T10, T100, write_measurement
+from tests.support.server import TABLE
 
 pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
 
@@ -125,3 +141,66 @@ def test_a_bad_run_raster_is_refused_naming_its_field(
     assert response.status_code == 422, response.text
     assert response.json()["error"]["field"] == "config.raster"
     assert "stored as recorded" in response.json()["error"]["message"]
+
+
+def _long_measurement(path: Path, rows: int) -> bytes:
+    """A multi-rate MDF4 written by asammdf: ``u1`` at about 1 kHz on jittered timestamps,
+    with masked (NaN) samples, and ``u2`` and ``y`` at 2 ms for ``rows`` samples, ``y`` a
+    smooth map of both plus noise."""
+    from asammdf import MDF, Signal
+
+    rng = np.random.default_rng(11)
+    t2 = 0.001 + 0.002 * np.arange(rows)
+    t1 = np.cumsum(rng.uniform(0.0009, 0.0011, 2 * rows + 20))
+    u1 = 2000.0 + 1400.0 * np.sin(t1 / 9.0)
+    u2 = 30.0 + 28.0 * np.sin(t2 / 23.0)
+    y = 1e-3 * np.interp(t2, t1, u1) + 0.05 * u2 + rng.normal(0.0, 0.05, rows)
+    u1[rng.choice(u1.size, 200, replace=False)] = np.nan
+    mdf = MDF(version="4.10")
+    mdf.append([Signal(u1, t1, name="u1", unit="rpm")])
+    mdf.append([Signal(u2, t2, name="u2", unit="%"), Signal(y, t2, name="y", unit="ppm")])
+    saved = Path(mdf.save(path, overwrite=True))
+    mdf.close()
+    return saved.read_bytes()
+
+
+@pytest.mark.slow
+def test_a_streamed_run_over_several_windows_equals_the_whole_read_fit(
+    client: TestClient, tmp_path: Path
+) -> None:
+    """A run on a dataset stored as recorded streams (docs/data-formats.md#streamed-runs): it
+    puts its channels on their raster a window at a time. On a multi-rate MDF4 of 2.5
+    windows on that raster, the final map is the fit on the whole read (the channels
+    resampled at once), bit for bit, across the windows' seams; its raster, sample count
+    and held-out check are the whole read's."""
+    rows = WINDOW_STEPS * 5 // 2
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        data = _long_measurement(tmp_path / "long.mf4", rows)
+    response = upload(client, data, name="long.mf4")
+    assert response.status_code == 201, response.text
+    dataset = response.json()
+    assert any("stored as recorded" in n for n in dataset["notes"])
+    done = wait_run(client, start_run(client, run_body(dataset["id"]))["id"], timeout=300)
+    assert done["status"] == "succeeded", done["error"]
+
+    parsed = ingest(data)
+    limits = IngestLimits()
+    table = resample(
+        parsed.recorded, Raster(), max_rows=limits.max_rows, max_values=limits.max_values
+    )
+    assert table.raster == Raster(channel="u2")  # the slowest: 2 ms, the first on a tie
+    signals = Signals(table.time, table.channels, table.units)
+    assert rows - 2 <= len(signals) <= rows  # 2.5 windows
+    axes = [a | {"unit": signals.units[a["name"]]} for a in TABLE["axes"]]
+    config = run_body(0)["config"] | {"axes": axes, "output": "y", "output_unit": "ppm"}
+    fit = get_spec("skf").build(config).fit(signals)
+    assert fit.table is not None
+    got = final_values(client, done["id"])["values"]
+    np.testing.assert_array_equal(np.asarray(got), fit.table.values)
+    metrics = client.get(f"/api/runs/{done['id']}").json()["metrics"]
+    assert metrics["samples"] == done["n_samples"] == len(signals)
+    assert metrics["raster_s"] == float(np.median(np.diff(signals.time)))
+    holdout = holdout_error("skf", config, signals).metrics()
+    assert metrics["holdout:samples"] == holdout["holdout:samples"]
+    assert metrics["holdout:rmse"] == pytest.approx(holdout["holdout:rmse"], rel=1e-9)

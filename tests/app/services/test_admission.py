@@ -4,6 +4,7 @@ budget a worker enforces."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -161,6 +162,22 @@ def test_a_streamed_observer_run_is_predicted_with_what_it_keeps_beyond_its_outp
         - _admit(name, cells, samples=small, streamed=True, corners=2).memory_bytes
     ) / STREAM_ROWS
     assert slope == 8 * len(spec.output_units) + STREAM_SAMPLE_BYTES + kept
+
+
+def test_a_streamed_run_on_a_recorded_dataset_is_predicted_with_its_raster() -> None:
+    """A dataset stored as recorded streams too, put on its raster a window at a time
+    (app.store.raster_rows): its run keeps the raster's time column as well, 8 bytes a
+    sample (docs/benchmarks.md#run-memory). The plan passes that on."""
+    plain = _admit("skf", 216, samples=10_000, streamed=True).memory_bytes
+    raster = _admit("skf", 216, samples=10_000, streamed=True, raster=True).memory_bytes
+    assert raster - plain == 8 * 10_000
+    timing = (0.0, (3000 - 1) / 50.0, 1.0 / 50.0)  # each channel's span and median step
+    recorded = replace(
+        _dataset(), channels=[replace(c, timing=timing) for c in _dataset().channels]
+    )
+    assert recorded.recorded
+    dense = _plan(_request()).prediction.memory_bytes
+    assert _plan(_request(), recorded).prediction.memory_bytes - dense == 8 * 3000
 
 
 def test_a_gated_run_is_predicted_with_its_masks() -> None:
