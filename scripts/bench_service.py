@@ -11,16 +11,17 @@ Against a real ``mapwise serve`` process:
    (its event loop and thread pool; % of one core) and the event loop's worst lag
    (``/api/health``: the last 30 s, so ``--live-seconds 30`` covers the viewers' phase
    exactly);
-3. API latency (p50/p99) of ``GET /api/runs/{id}`` and ``GET /api/datasets`` polled by 4
-   concurrent clients, measured apart during phase 1 (the bulk upload and full-speed run)
-   and during phase 2 (the viewers).
+3. API latency (p50/p99) of ``GET /api/runs?limit=5`` and ``GET /api/datasets`` polled by
+   ``--pollers`` concurrent clients (4), back to back or every ``--poll-every`` seconds,
+   measured apart during phase 1 (the bulk upload and full-speed run) and during phase 2
+   (the viewers).
 
 A run that does not finish in ``--timeout`` seconds, or a viewer or poller that fails, ends
 the benchmark with an error instead of a figure.
 
     .venv/bin/python scripts/bench_service.py [--database-url URL] [--rows N] [--viewers N]
         [--encoding json|binary|both] [--live-seconds S] [--live-only] [--repeat 5]
-        [--deflate] [--json]
+        [--pollers N] [--poll-every S] [--deflate] [--json]
 
 Each figure is the median and the worst of ``--repeat`` rounds on one server (the machines
 are shared and noisy); ``--live-only`` skips phase 1 (the log is uploaded once);
@@ -124,13 +125,19 @@ def viewer(url: str, seconds: float, counts: list[tuple[int, int]], index: int) 
     counts[index] = (n, size)
 
 
-def poller(base: str, paths: list[str], stop: threading.Event, out: list[float]) -> None:
+def poller(
+    base: str, paths: list[str], stop: threading.Event, out: list[float], every_s: float = 0.0
+) -> None:
+    """Request ``paths`` in turn until ``stop``: back to back (``every_s`` 0, a closed loop
+    that takes whatever CPU the server leaves), or each round ``every_s`` after the last."""
     with httpx.Client(base_url=base, timeout=30) as client:
         while not stop.is_set():
             for path in paths:
                 t0 = time.perf_counter()
                 client.get(path).raise_for_status()
                 out.append(time.perf_counter() - t0)
+            if every_s > 0:
+                stop.wait(every_s)
 
 
 def peak_rss_mb(pid: int) -> float:
@@ -175,7 +182,8 @@ def bulk_round(
     stop = threading.Event()
     paths = ["/api/runs?limit=5", "/api/datasets"]
     pollers = [
-        Worker(poller, server.base, paths, stop, bulk_latencies) for _ in range(args.pollers)
+        Worker(poller, server.base, paths, stop, bulk_latencies, args.poll_every)
+        for _ in range(args.pollers)
     ]
     for th in pollers:
         th.start()
@@ -227,7 +235,10 @@ def live_round(
     latencies: list[float] = []
     stop = threading.Event()
     paths = [f"/api/runs/{live['id']}", "/api/datasets"]
-    pollers = [Worker(poller, server.base, paths, stop, latencies) for _ in range(args.pollers)]
+    pollers = [
+        Worker(poller, server.base, paths, stop, latencies, args.poll_every)
+        for _ in range(args.pollers)
+    ]
     api = psutil.Process(server.process.pid)
     loop0 = client.get("/api/health").json()["loop_cpu_s"]
     cpu0, t0 = sum(api.cpu_times()[:2]), time.monotonic()
@@ -281,6 +292,13 @@ def main() -> None:
     parser.add_argument(
         "--pollers", type=int, default=4, help="clients polling the API meanwhile (latency)"
     )
+    parser.add_argument(
+        "--poll-every",
+        type=float,
+        default=0.0,
+        help="seconds between a poller's rounds; 0 (default): back to back, a closed loop "
+        "(the dashboard polls a run group once a second)",
+    )
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     if args.repeat < 1:
@@ -308,6 +326,8 @@ def main() -> None:
         "live_seconds": args.live_seconds,
         "ws_deflate": args.deflate,
         "rounds": args.repeat,
+        "pollers": args.pollers,
+        "poll_every_s": args.poll_every,
     }
     rounds: list[dict[str, Any]] = []
     try:
