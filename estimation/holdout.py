@@ -19,9 +19,10 @@ The same prediction with the filter's initial map ``θ0`` (the unadapted base ma
 beside it, so "the adapted map predicts better than the base map" is a number, not a claim.
 
 This is the map filters' check. Each estimator kind has its own, named in the registry
-(:data:`estimation.registry.HOLDOUT`): the LPV observer's and the EKFs' are in
-:mod:`estimation.holdout_observers`; the torque estimators have none, and
-:func:`unmeasured_input` says so in the run's metrics (docs/tuning.md#which-runs-report-what).
+(:data:`estimation.registry.HOLDOUT`): the LPV observer's is in
+:mod:`estimation.holdout_observers`, the EKFs' in :mod:`estimation.holdout_ekf`; the torque
+estimators have none, and :func:`unmeasured_input` says so in the run's metrics
+(docs/tuning.md#which-runs-report-what).
 """
 
 from __future__ import annotations

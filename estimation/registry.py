@@ -273,7 +273,7 @@ HOLDOUT: Mapping[EstimatorKind, str] = MappingProxyType(
     {
         EstimatorKind.MAP_FILTER: "estimation.holdout:holdout_error",
         EstimatorKind.MAP_OBSERVER: "estimation.holdout_observers:lpv_holdout",
-        EstimatorKind.JOINT_EKF: "estimation.holdout_observers:ekf_holdout",
+        EstimatorKind.JOINT_EKF: "estimation.holdout_ekf:ekf_holdout",
         EstimatorKind.TORQUE: "estimation.holdout:unmeasured_input",
     }
 )
@@ -284,7 +284,7 @@ HOLDOUT_WINDOWS: Mapping[EstimatorKind, str] = MappingProxyType(
     {
         EstimatorKind.MAP_FILTER: "estimation.holdout:holdout_error_windows",
         EstimatorKind.MAP_OBSERVER: "estimation.holdout_observers:lpv_holdout_windows",
-        EstimatorKind.JOINT_EKF: "estimation.holdout_observers:ekf_holdout_windows",
+        EstimatorKind.JOINT_EKF: "estimation.holdout_ekf:ekf_holdout_windows",
         EstimatorKind.TORQUE: "estimation.holdout:unmeasured_input_windows",
     }
 )

@@ -26,7 +26,7 @@ on the same samples.
 
 The joint EKFs (``ekf-def``, ``ekf-aug``, ``ekf-map``; :func:`tune_ekf`) are scored the same
 way on the innovations of their **MAF** updates only (``e_k``, ``S_k`` of
-:func:`estimation.holdout_observers.ekf_innovations`, EKF §3: ``S = H P⁻ Hᵀ + R`` with
+:func:`estimation.holdout_ekf.ekf_innovations`, EKF §3: ``S = H P⁻ Hᵀ + R`` with
 ``R = σ_abs² + (σ_rel y)²``); the noise of the other outputs stays as configured. Tuned:
 the MAF's ``sigma_maf_rel`` and ``sigma_maf_abs`` and, for Aug and Map, the random walk of
 their parameters (``sigma_bias``, ``sigma_theta``): with that walk held at its default the
@@ -175,7 +175,7 @@ def tune_ekf(
     """Choose the MAF noise (and parameter walk) of EKF ``estimator`` on ``signals`` by
     maximum likelihood of its MAF innovations (module docstring); ``start`` overrides the
     config's values as starts."""
-    from estimation.holdout_observers import ekf_innovations
+    from estimation.holdout_ekf import ekf_innovations
     from estimation.kernels.ekf import Y_MAF
     from estimation.observers.ekf import EkfObserver
     from estimation.registry import get_spec

@@ -16,7 +16,7 @@ the config drawn for it. It prints one JSON document (docs/tuning.md, docs/cli.m
 
 ``parameters`` are standard deviations in the output's unit (EKF: ``sigma_maf_rel``,
 ``sigma_maf_abs`` [kg/s] and ``sigma_bias`` [kg/s/√s] or ``sigma_theta`` [1/√s]; its
-``holdout`` is :func:`estimation.holdout_observers.ekf_holdout`'s); the search and its
+``holdout`` is :func:`estimation.holdout_ekf.ekf_holdout`'s); the search and its
 bounds are those of :mod:`estimation.tuning`.
 """
 
@@ -228,7 +228,7 @@ def tune_log(
 
 def tune_ekf_command(args: argparse.Namespace) -> dict[str, Any]:
     """``mapwise tune`` of a joint EKF: its log and config, the tuning, the held-out check."""
-    from estimation.holdout_observers import ekf_holdout
+    from estimation.holdout_ekf import ekf_holdout
 
     wrong = [f for f in MAP_ONLY if getattr(args, f, None) not in (None, [])]
     if wrong:

@@ -1,6 +1,7 @@
 """Held-out prediction error and innovation statistics of the LPV observer and the EKFs
-(estimation/holdout_observers.py, docs/tuning.md#which-runs-report-what), and the torque
-estimators' explicit "not applicable"."""
+(estimation/holdout_observers.py, estimation/holdout_ekf.py,
+docs/tuning.md#which-runs-report-what), and the torque estimators' explicit "not
+applicable"."""
 
 from __future__ import annotations
 
@@ -13,15 +14,8 @@ from numpy.testing import assert_allclose, assert_array_equal
 from estimation.errors import ConfigError
 from estimation.estimator import LogWindows
 from estimation.holdout import UNMEASURED_INPUT, unmeasured_input
-from estimation.holdout_observers import (
-    ekf_holdout,
-    ekf_holdout_windows,
-    ekf_innovations,
-    ekf_predict,
-    lpv_holdout,
-    lpv_holdout_windows,
-    lpv_predict,
-)
+from estimation.holdout_ekf import ekf_holdout, ekf_holdout_windows, ekf_innovations, ekf_predict
+from estimation.holdout_observers import lpv_holdout, lpv_holdout_windows, lpv_predict
 from estimation.innovation import innovation_stats
 from estimation.kernels import ekf as kern
 from estimation.metrics import output_metrics

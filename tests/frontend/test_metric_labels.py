@@ -1,6 +1,6 @@
 """Every metric key a run stores has a name and a formula in the dashboard: the truth-free
-checks of estimation/holdout_observers.py (per-output held-out error and NIS, the LPV
-observer's output-error statistics) and the checks an estimator has no honest form of
+checks of estimation/holdout_observers.py and holdout_ekf.py (per-output held-out error and
+NIS, the LPV observer's output-error statistics) and the checks an estimator has no honest form of
 (``…:not_applicable:<reason>``, stored as null), which would otherwise show as raw keys."""
 
 from __future__ import annotations

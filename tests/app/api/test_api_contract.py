@@ -19,7 +19,8 @@ from app.io.decimate import minmax_decimate
 from app.runs.gates import apply_gates, parse_gates
 from estimation.estimator import WINDOW_STEPS
 from estimation.holdout import holdout_error
-from estimation.holdout_observers import ekf_holdout, lpv_holdout
+from estimation.holdout_ekf import ekf_holdout
+from estimation.holdout_observers import lpv_holdout
 from estimation.registry import get_spec
 from estimation.scenarios import get_scenario
 from estimation.signals import Signals
