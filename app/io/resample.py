@@ -25,7 +25,9 @@ is asked for, the channels are returned unchanged and no note is written.
 
 :func:`shared_time_base` tells whether the tracks are on one time base: an upload whose
 aren't, with no raster asked for, is stored as recorded and resampled when it is read, onto
-the slowest raster among the channels that read needs (:mod:`app.store.datasets`).
+the slowest raster among the channels that read needs: whole (:mod:`app.store.datasets`) or,
+for a run, a window at a time by the same rules (:mod:`app.store.raster_rows`, which plans
+its raster with :func:`plan_span` from the spans ingest keeps, :func:`span_of`).
 """
 
 from __future__ import annotations

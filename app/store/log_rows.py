@@ -73,7 +73,7 @@ class StoredRows:
 
     def __init__(self, file: SignalsFile, names: Sequence[str], units: dict[str, str]) -> None:
         if file.recorded:
-            raise ValueError("a dataset stored as recorded is read whole, onto a raster")
+            raise ValueError("a dataset stored as recorded is read on a raster (RasterRows)")
         self.file = file
         stored = [name for name, _ in file.channels]
         self.names = [name for name in stored if name in set(names)]
