@@ -241,8 +241,10 @@ def plan_span(spans: Sequence[Span], raster: Raster) -> tuple[float, float, Rast
 def rate_grid(
     start: float, stop: float, step: float, channels: int, max_rows: int, max_values: int
 ) -> np.ndarray:
-    """``start + step·k`` for every ``k`` up to ``stop``, refused before it is allocated
-    when it exceeds ``max_rows`` rows or ``max_values`` values over ``channels``."""
+    """``start + step·k`` for ``k = 0 … ⌊(stop − start)/step · (1 + 10⁻¹²)⌋`` (the last time
+    may pass ``stop`` by a rounding: it is held at the channels' last values), refused
+    before it is allocated when it exceeds ``max_rows`` rows or ``max_values`` values over
+    ``channels``."""
     # a float count: the count of a tiny step overflows an int (and is refused)
     rows = float(np.floor((stop - start) / step * (1 + 1e-12))) + 1
     check_size(rows, channels, Raster(step=step), max_rows, max_values)

@@ -3,14 +3,18 @@
 :class:`RasterRows` is the streamed counterpart of :func:`app.store.datasets.load_on_raster`
 (`docs/data-formats.md#streamed-runs`). It plans the raster by the same rules
 (:func:`app.io.resample.plan_span`), from the channels' spans that ingest keeps on the
-dataset's row (:attr:`app.domain.Channel.timing`) instead of from a pass over the samples,
-and holds only the raster's time column (8 bytes a row, as every streamed log does).
+dataset's row (:attr:`app.domain.Channel.timing`) instead of from the samples. One pass over
+the stored row groups then notes each group's first and last time and, per channel, its
+first and last valid sample (and, for a channel's raster, that channel's sample times). The
+run holds the raster's times (8 bytes a row) and those few values a row group.
 
-Row ``k`` of its raster equals row ``k`` of the whole read, bit for bit. A window decodes the
-stored row groups that hold its span, widened until every channel has a valid sample at or
-before the window's first time and, for a channel interpolated linearly, one at or after its
-last. Zero-order hold reads only the previous valid sample, and ``numpy.interp`` only the two
-valid samples around each time, so the other samples of the log are never needed.
+Row ``k`` of its raster equals row ``k`` of the whole read, bit for bit. A window is made
+:data:`SPAN_GROUPS` stored row groups at a time. Zero-order hold reads only the last valid
+sample at or before each time, and ``numpy.interp`` only the two valid samples around it (or
+the last one, past a channel's last sample). So each part decodes the groups that hold its
+span and adds, for a channel without it there, that one neighbouring valid sample from the
+pass's notes: a masked run or a channel logged only when it changes never makes a part
+decode the groups across it.
 """
 
 from __future__ import annotations
@@ -24,7 +28,7 @@ import pyarrow as pa
 
 from app.io.arrow_arrays import float64_values, valid_rows
 from app.io.errors import InputError
-from app.io.resample import Raster, Span, Track, check_size, on_grid, plan_span, rate_grid
+from app.io.resample import Raster, Span, Track, on_grid, plan_span, rate_grid
 from app.store.errors import ArtifactCorruptError
 from app.store.parquet_signals import SignalsFile
 from estimation.signals import Signals
@@ -49,9 +53,11 @@ class RasterRows:
     ``spans``: each channel's first and last valid time and median step, as ingest found
     them; a channel without one, or with fewer than two valid samples, is left out, as
     :func:`app.io.resample.resample` drops it. ``raster`` ``None`` is the default (the
-    slowest channel's). Raises :class:`~app.io.errors.InputError` where the whole read
-    would: no usable channel, a raster channel not among them, spans that do not overlap,
-    a raster over ``max_rows`` rows or ``max_values`` values."""
+    slowest channel's). Raises :class:`~app.io.errors.InputError` as the whole read does for
+    no usable channel, a raster channel not among them, spans that do not overlap, and a
+    rate raster over ``max_rows`` rows or ``max_values`` values. A channel's raster is not
+    held to those limits: its rows are recorded samples and the table is never built (the
+    whole read refuses one over them, except when the channels share their timestamps)."""
 
     def __init__(
         self,
@@ -79,16 +85,22 @@ class RasterRows:
         self.names = [s.name for s in usable]
         self.units = {name: units[name] for name in self.names}
         self.hold = [name in file.hold for name in self.names]
+        self.stops = [s.stop for s in usable]  # each channel's last valid time
         self.fields = [file.time_name, *self.names]
-        meta = file.reader.metadata
-        self.groups = meta.num_row_groups
+        self.groups = file.reader.metadata.num_row_groups
         self.cache: OrderedDict[int, _Group] = OrderedDict()
-        self.first_times, self.last_times = self._group_bounds()
-        self.grid = self._grid(start, stop, len(usable), max_rows, max_values)
-        self.n = int(self.grid.size)
+        if self.raster.step is not None:
+            grid = rate_grid(start, stop, self.raster.step, len(usable), max_rows, max_values)
+            self._scan(None)
+        else:
+            own = self._scan(self.names.index(self.raster.channel or ""))
+            grid = own[(own >= start) & (own <= stop)]
+            del own
+        self.grid = grid
+        self.n = int(grid.size)
         self.step_s = None
         if self.n > 1:  # the whole read's median step; its copy is sorted in place
-            self.step_s = float(np.median(np.diff(self.grid), overwrite_input=True))
+            self.step_s = float(np.median(np.diff(grid), overwrite_input=True))
 
     def rows(self, a: int, z: int) -> Signals:
         """Raster rows ``a … z−1``, made :data:`SPAN_GROUPS` stored row groups at a time, so
@@ -103,10 +115,8 @@ class RasterRows:
             limit = self.last_times[min(g + SPAN_GROUPS, self.groups) - 1]
             end = max(k + 1, int(np.searchsorted(grid, limit, side="right")))
             part = grid[k:end]
-            time, values, present = self._around(float(part[0]), float(part[-1]))
-            for name, hold, v, p in zip(self.names, self.hold, values, present, strict=True):
-                track = Track(name, self.units[name], time[p], v[p], hold)
-                channels[name][k:end] = on_grid(track, track.time[track.valid], part)
+            for track in self._tracks(float(part[0]), float(part[-1])):
+                channels[track.name][k:end] = on_grid(track, track.time[track.valid], part)
             k = end
         return Signals(grid, channels, self.units, copy=False)
 
@@ -116,60 +126,70 @@ class RasterRows:
 
     # -- reading ------------------------------------------------------------------------------
 
-    def _grid(
-        self, start: float, stop: float, channels: int, max_rows: int, max_values: int
-    ) -> np.ndarray:
-        """The raster's times over ``[start, stop]``: a rate's, or the raster channel's
-        sample times there."""
-        if self.raster.step is not None:
-            return rate_grid(start, stop, self.raster.step, channels, max_rows, max_values)
-        own = self._present_times(self.raster.channel or "")
-        grid = own[(own >= start) & (own <= stop)]
-        check_size(grid.size, channels, self.raster, max_rows, max_values)
-        return grid
+    def _scan(self, channel: int | None) -> np.ndarray:
+        """One pass over the row groups: each one's first and last time, and per channel its
+        first and last valid sample (NaN: none); returns the sample times of channel number
+        ``channel`` (empty for ``None``)."""
+        shape = (self.groups, len(self.names))
+        self.first_times, self.last_times = np.empty(self.groups), np.empty(self.groups)
+        self.first_valid = (np.full(shape, np.nan), np.full(shape, np.nan))  # (time, value)
+        self.last_valid = (np.full(shape, np.nan), np.full(shape, np.nan))
+        own = []
+        for g in range(self.groups):
+            group = self._group(g)
+            time = group.time
+            self.first_times[g], self.last_times[g] = time[0], time[-1]
+            for c, (v, p) in enumerate(zip(group.values, group.present, strict=True)):
+                valid = np.flatnonzero(p & np.isfinite(v))
+                if valid.size:
+                    i, j = valid[0], valid[-1]
+                    self.first_valid[0][g, c], self.first_valid[1][g, c] = time[i], v[i]
+                    self.last_valid[0][g, c], self.last_valid[1][g, c] = time[j], v[j]
+                if c == channel:
+                    own.append(time[p])
+        return np.concatenate(own) if own else np.empty(0)
 
-    def _around(
-        self, first: float, last: float
-    ) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray]]:
-        """The stored rows from the row group of the last row at or before ``first`` to that
-        of the first row at or after ``last``, widened a group at a time until each channel
-        has the valid neighbours its rule reads."""
+    def _tracks(self, first: float, last: float) -> list[Track]:
+        """Each channel's samples from the row group of the last stored row at or before
+        ``first`` to that of the first at or after ``last``; a channel with no valid sample
+        at or before ``first`` there gets the last one before, and an interpolated channel
+        with none at or after ``last`` (or its own last valid time, if earlier) the first one
+        after, from the pass's notes."""
         g0 = max(0, int(np.searchsorted(self.first_times, first, side="right")) - 1)
         g1 = min(self.groups - 1, int(np.searchsorted(self.last_times, last, side="left")))
-        while True:
-            parts = [self._group(g) for g in range(g0, g1 + 1)]
-            time = np.concatenate([p.time for p in parts])
-            values = [np.concatenate(c) for c in zip(*(p.values for p in parts), strict=True)]
-            present = [np.concatenate(c) for c in zip(*(p.present for p in parts), strict=True)]
-            before, after = True, True
-            for hold, v, p in zip(self.hold, values, present, strict=True):
-                valid_time = time[p & np.isfinite(v)]
-                before &= valid_time.size > 0 and valid_time[0] <= first
-                after &= hold or (valid_time.size > 0 and valid_time[-1] >= last)
-            if before and after:
-                return time, values, present
-            if (not before and g0 == 0) or (not after and g1 == self.groups - 1):
-                raise ArtifactCorruptError(
-                    "the channels' spans on the dataset's row do not match its samples"
-                )
-            g0 -= 0 if before else 1
-            g1 += 0 if after else 1
+        parts = [self._group(g) for g in range(g0, g1 + 1)]
+        time = np.concatenate([p.time for p in parts])
+        tracks = []
+        for c, name in enumerate(self.names):
+            present = np.concatenate([p.present[c] for p in parts])
+            t, v = time[present], np.concatenate([p.values[c] for p in parts])[present]
+            valid_time = t[np.isfinite(v)]
+            if valid_time.size == 0 or valid_time[0] > first:
+                t, v = self._with(t, v, self._neighbour(c, range(g0 - 1, -1, -1), before=True))
+            reach = min(last, self.stops[c])
+            if not self.hold[c] and (valid_time.size == 0 or valid_time[-1] < reach):
+                t, v = self._with(t, v, self._neighbour(c, range(g1 + 1, self.groups)))
+            tracks.append(Track(name, self.units[name], t, v, self.hold[c]))
+        return tracks
 
-    def _group_bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """Each row group's first and last time."""
-        first, last = np.empty(self.groups), np.empty(self.groups)
-        for g in range(self.groups):
-            time = self._decode(g, [self.file.time_name])[0][0]
-            first[g], last[g] = time[0], time[-1]
-        return first, last
+    def _neighbour(self, c: int, groups: range, *, before: bool = False) -> tuple[float, float]:
+        """The valid sample of channel ``c`` nearest the part among ``groups`` (searched in
+        their order): the last of the first group with one, before the part, or the first."""
+        times, values = self.last_valid if before else self.first_valid
+        for g in groups:
+            if not np.isnan(times[g, c]):
+                return float(times[g, c]), float(values[g, c])
+        raise ArtifactCorruptError(
+            f"channel {self.names[c]!r}: its span on the dataset's row does not match its samples"
+        )
 
-    def _present_times(self, name: str) -> np.ndarray:
-        """The times of the rows where channel ``name`` has a sample."""
-        parts = []
-        for g in range(self.groups):
-            (time, _), (_, present) = self._decode(g, [self.file.time_name, name])
-            parts.append(time[present])
-        return np.concatenate(parts) if parts else np.empty(0)
+    @staticmethod
+    def _with(
+        t: np.ndarray, v: np.ndarray, sample: tuple[float, float]
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``t``, ``v`` with ``sample`` added in time order."""
+        at = int(np.searchsorted(t, sample[0]))
+        return np.insert(t, at, sample[0]), np.insert(v, at, sample[1])
 
     def _group(self, g: int) -> _Group:
         if g in self.cache:

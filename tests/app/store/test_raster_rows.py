@@ -1,11 +1,14 @@
 """A dataset stored as recorded, read a window at a time on a raster
 (docs/data-formats.md#streamed-runs): every window of :class:`RasterRows` equals the same rows
 of the whole read (:func:`load_on_raster`) bit for bit, on the default raster, a channel's and
-a rate's, with masked samples, held channels and a gap that spans row groups; and it refuses
-what the whole read refuses, with the same message."""
+a rate's (its last time past the span by a rounding too), with masked samples, held channels,
+a gap that spans row groups and a channel logged only when it changes, without decoding the
+groups across a gap; and it refuses a rate raster and a bad raster as the whole read does,
+with the same message."""
 
 from __future__ import annotations
 
+import tracemalloc
 import warnings
 from pathlib import Path
 
@@ -15,8 +18,9 @@ import pytest
 from app.domain import Channel, StoredSamples
 from app.io.errors import InputError
 from app.io.ingest import ingest
-from app.io.resample import Raster, Track, parse_raster, span_of
+from app.io.resample import Raster, Span, Track, parse_raster, span_of
 from app.store import ArtifactStore, load_on_raster, open_store, save_staged, stage_recorded
+from app.store.datasets import open_signals
 from app.store.log_rows import open_rows
 from app.store.raster_rows import RasterRows
 from tests.support.measurements import write_measurement
@@ -159,3 +163,67 @@ def test_a_channel_without_usable_samples_is_left_out(tmp_path: Path) -> None:
     store, stored, channels = _stored(tmp_path, tracks)
     rows = _assert_windows_equal(store, stored, channels, ["fast", "lone", "slow"], None)
     assert "lone" not in rows.names
+
+
+def test_a_rate_raster_whose_last_time_passes_the_span_by_a_rounding(tmp_path: Path) -> None:
+    """``0 + 0.1·3`` is 0.30000000000000004, past the span's end at 0.3 s: the whole read
+    holds the channel that ends there at its last value, and so does every window."""
+    t1 = np.arange(31) * 0.01
+    t1[-1] = 0.3
+    t2 = np.linspace(0.0, 0.35, 351)
+    tracks = [
+        Track("a", "-", t1, np.sin(t1), False),
+        Track("b", "-", t2, np.cos(t2), False),
+    ]
+    store, stored, channels = _stored(tmp_path, tracks)
+    rows = _assert_windows_equal(store, stored, channels, ["a", "b"], parse_raster("100ms"))
+    assert rows.time()[-1] > 0.3
+
+
+def test_a_sparse_channel_never_makes_a_window_decode_the_log(tmp_path: Path) -> None:
+    """A gear logged only when it changes (three samples in 20 row groups) and an
+    interpolated channel masked over 14 of them: every window equals the whole read, and a
+    one-row window in the middle holds a few row groups, not the groups across the gap
+    (traced allocations, not time)."""
+    n = 20 * 65_536
+    t = np.arange(n) * 0.001
+    rpm = 2000.0 + 500.0 * np.sin(t)
+    lam = 1.0 + 0.01 * np.cos(t / 3.0)
+    lam[(t > 200.0) & (t < 1100.0)] = np.nan
+    tracks = [
+        Track("rpm", "rpm", t, rpm, False),
+        Track("gear", "-", np.array([0.0, 1.0, t[-1]]), np.array([1.0, 2.0, 3.0]), True),
+        Track("lambda", "-", t, lam, False),
+    ]
+    store, stored, channels = _stored(tmp_path, tracks)
+    names = ["rpm", "gear", "lambda"]
+    _assert_windows_equal(store, stored, channels, names, Raster(channel="rpm"))
+    with open_rows(store, stored, channels, names, raster=Raster(channel="rpm")) as rows:
+        assert isinstance(rows, RasterRows)
+        middle = rows.n // 2
+        tracemalloc.start()
+        try:
+            rows.rows(middle, middle + 1)
+            peak = tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+    group_bytes = 65_536 * (8 + 3 * 9)  # a decoded row group: time, values and presence
+    assert peak < 8 * group_bytes, peak / group_bytes  # the gap spans 14 groups
+
+
+def test_a_channel_raster_is_not_held_to_the_whole_tables_limits(tmp_path: Path) -> None:
+    """A rate raster makes rows out of nothing and is refused over the limits, as the whole
+    read refuses it; a channel's raster is its recorded samples, and a run never builds the
+    table, so it is not (the whole read takes it too when the channels share timestamps)."""
+    store, stored, channels = _stored(tmp_path, _tracks())
+    names = ["fast", "mid"]
+    spans = {c.name: Span(c.name, *c.timing) for c in channels if c.timing is not None}
+    units = {c.name: c.unit for c in channels}
+    with open_signals(store, stored.dataset_id, stored.key, stored.sha256) as file:
+        on_fast = RasterRows(
+            file, names, units, spans, Raster(channel="fast"), max_rows=1000, max_values=1000
+        )
+        assert on_fast.n > 1000
+        with pytest.raises(InputError, match="limits are 1000 rows") as refused:
+            RasterRows(file, names, units, spans, Raster(step=0.01), max_rows=1000, max_values=1000)
+        assert refused.value.field == "raster"
