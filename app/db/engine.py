@@ -3,7 +3,9 @@
 SQLite gets WAL (readers never wait for the writer), a busy timeout, enforced foreign keys,
 and ``BEGIN IMMEDIATE`` for write transactions: a deferred transaction that reads and then
 writes fails at once with "database is locked" when another process wrote in between,
-whatever the timeout. PostgreSQL gets ``pool_pre_ping`` so a restarted server is survived.
+whatever the timeout. PostgreSQL gets ``pool_pre_ping`` so a restarted server is survived,
+and its read units of work run at REPEATABLE READ: every statement of one sees the same
+snapshot, as on SQLite (a list's total and its items agree).
 
 Each SQLite connection's private page cache is held to ``SQLITE_CACHE_KIB``. SQLite's
 default (2 MiB a connection) filled, page by page, as the database grew under the soak, so
@@ -81,7 +83,13 @@ class Database:
     def __init__(self, url: str) -> None:
         self.url = normalise_url(url)
         self.engine = make_engine(self.url)
-        self._read = sessionmaker(bind=self.engine, expire_on_commit=False)
+        # One snapshot for a read unit of work, so a page's total and its items agree: SQLite's
+        # deferred BEGIN gives it; PostgreSQL's default READ COMMITTED takes a snapshot per
+        # statement (a read-only REPEATABLE READ transaction never fails to serialise).
+        reads = self.engine
+        if self.backend == "postgresql":
+            reads = self.engine.execution_options(isolation_level="REPEATABLE READ")
+        self._read = sessionmaker(bind=reads, expire_on_commit=False)
         self._write = sessionmaker(
             bind=self.engine.execution_options(**{_WRITE: True}), expire_on_commit=False
         )
