@@ -177,7 +177,7 @@ def resample(
     else:
         own = by_name[raster.channel].time  # type: ignore[index]
         time = own[(own >= start) & (own <= stop)]
-        check_size(time.size, len(usable), raster, max_rows, max_values)
+        _check_size(time.size, len(usable), raster, max_rows, max_values)
     channels = {t.name: on_grid(t, valid_times[t.name], time) for t in usable}
     held = [t.name for t in usable if t.hold]
     smooth = [t.name for t in usable if not t.hold]
@@ -247,7 +247,7 @@ def rate_grid(
     ``channels``."""
     # a float count: the count of a tiny step overflows an int (and is refused)
     rows = float(np.floor((stop - start) / step * (1 + 1e-12))) + 1
-    check_size(rows, channels, Raster(step=step), max_rows, max_values)
+    _check_size(rows, channels, Raster(step=step), max_rows, max_values)
     return start + step * np.arange(int(rows), dtype=np.float64)
 
 
@@ -306,7 +306,7 @@ def on_grid(track: Track, valid_time: np.ndarray, grid: np.ndarray) -> np.ndarra
     return np.interp(grid, valid_time, values)
 
 
-def check_size(rows: float, channels: int, raster: Raster, max_rows: int, max_values: int) -> None:
+def _check_size(rows: float, channels: int, raster: Raster, max_rows: int, max_values: int) -> None:
     if not (rows <= max_rows and rows * channels <= max_values):  # also refuses inf
         shown = f"{int(rows)}" if np.isfinite(rows) and rows < 1e15 else f"{rows:.3g}"
         raise InputError(

@@ -156,10 +156,9 @@ class RunSession:
         if streams_input(spec, dataset, self.estimator):
             rows = open_rows(store, loaded.samples, dataset.channels, names, raster=raster)
             log = self.closing.enter_context(rows)
-            self.rate_hz = dataset.rate_hz
-            if isinstance(log, RasterRows):  # stored as recorded: the rate of its raster
-                self.raster_s = log.step_s
-                self.rate_hz = dataset.rate_hz if log.step_s is None else 1.0 / log.step_s
+            # stored as recorded: the rate of the raster this run's channels set
+            self.raster_s = log.step_s if isinstance(log, RasterRows) else None
+            self.rate_hz = dataset.rate_hz if self.raster_s is None else 1.0 / self.raster_s
             self.options = run_options(
                 self.run.config, log.n, self.rate_hz, self.ctx.version_fraction
             )

@@ -22,6 +22,7 @@ from app.io.resample import Raster, Span, Track, parse_raster, span_of
 from app.store import ArtifactStore, load_on_raster, open_store, save_staged, stage_recorded
 from app.store.datasets import open_signals
 from app.store.log_rows import open_rows
+from app.store.parquet_signals import ROW_GROUP_ROWS
 from app.store.raster_rows import RasterRows
 from tests.support.measurements import write_measurement
 
@@ -185,7 +186,7 @@ def test_a_sparse_channel_never_makes_a_window_decode_the_log(tmp_path: Path) ->
     interpolated channel masked over 14 of them: every window equals the whole read, and a
     one-row window in the middle holds a few row groups, not the groups across the gap
     (traced allocations, not time)."""
-    n = 20 * 65_536
+    n = 20 * ROW_GROUP_ROWS
     t = np.arange(n) * 0.001
     rpm = 2000.0 + 500.0 * np.sin(t)
     lam = 1.0 + 0.01 * np.cos(t / 3.0)
@@ -207,7 +208,7 @@ def test_a_sparse_channel_never_makes_a_window_decode_the_log(tmp_path: Path) ->
             peak = tracemalloc.get_traced_memory()[1]
         finally:
             tracemalloc.stop()
-    group_bytes = 65_536 * (8 + 3 * 9)  # a decoded row group: time, values and presence
+    group_bytes = ROW_GROUP_ROWS * (8 + 3 * 9)  # a decoded row group: time, values and presence
     assert peak < 8 * group_bytes, peak / group_bytes  # the gap spans 14 groups
 
 
