@@ -86,6 +86,13 @@ class Settings(BaseSettings):
         le=64,
         description="Processes executing runs in parallel.",
     )
+    run_workers_prestart: bool = Field(
+        True,
+        description="Start every run worker at start-up, so the first run does not wait about "
+        "1 s for one to import and load the kernels; off: a worker starts with the first run "
+        "that needs it, and a server that runs nothing holds no worker's memory (about "
+        "300 MiB each).",
+    )
     version_fraction: float = Field(
         0.1,
         gt=0,

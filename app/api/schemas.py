@@ -49,6 +49,10 @@ class HealthOut(BaseModel):
     version: str
     auth_required: bool
     workers: int
+    workers_alive: int | None = Field(
+        description="Run worker processes alive now (local executor; null on Dask): fewer "
+        "than workers before the first runs with MAPWISE_RUN_WORKERS_PRESTART=false."
+    )
     loop_lag_ms: float = Field(
         description="Worst lateness of the event loop over the last 30 s, in milliseconds."
     )

@@ -89,6 +89,10 @@ class DaskExecutor(ExecutorBase):
             self.submit(run_id)
         self._start_sweeper()
 
+    def workers_alive(self) -> int | None:
+        """``None``: the cluster's workers are Dask's to count."""
+        return None
+
     def submit(self, run_id: int) -> None:
         from distributed import fire_and_forget
 

@@ -91,7 +91,12 @@ class RunExecutor(ExecutorBase):
         self._loop = loop
         self._queue = self._mp.Queue(maxsize=10_000)
         self._pool = WorkerPool(
-            self.settings.run_workers, self.context, self._queue, self._outcome, self._mp
+            self.settings.run_workers,
+            self.context,
+            self._queue,
+            self._outcome,
+            self._mp,
+            prestart=self.settings.run_workers_prestart,
         )
         self._pool.start()
         self._pump = threading.Thread(target=self._pump_messages, name="mapwise-pump", daemon=True)
@@ -136,6 +141,12 @@ class RunExecutor(ExecutorBase):
             self._queue.join_thread()
 
     # -- runs -----------------------------------------------------------------------------------
+
+    def workers_alive(self) -> int | None:
+        """Run worker processes alive now (fewer than ``run_workers`` before the first runs
+        without prestart, or while a dead one is replaced)."""
+        pool = self._pool
+        return 0 if pool is None else pool.alive()
 
     def submit(self, run_id: int) -> None:
         pool = self._pool
@@ -216,6 +227,7 @@ class Executor(Protocol):
     """What the service needs of an executor."""
 
     def start(self, loop: asyncio.AbstractEventLoop) -> None: ...
+    def workers_alive(self) -> int | None: ...
     def submit(self, run_id: int) -> None: ...
     def deliver_local(self, message: dict[str, Any]) -> None: ...
     def sweep(self) -> list[int]: ...

@@ -285,10 +285,11 @@ class _Slot:
 
     def _serve(self) -> None:
         pool = self.pool
+        wanted = pool.prestart  # keep a worker alive; without prestart, from the first run on
         while True:
             run_id: int | None = None
             try:
-                if not self._alive():
+                if wanted and not self._alive():
                     if pool.closing.is_set():
                         return
                     self._spawn()
@@ -301,6 +302,9 @@ class _Slot:
                     return
                 if pool.closing.is_set():
                     continue  # stays queued in the database for the next start-up
+                if not wanted:
+                    wanted = True
+                    self._spawn()
                 self.run_id = run_id
                 outcome = self._execute(run_id)
                 self.run_id = None
@@ -323,7 +327,11 @@ class _Slot:
 
 class WorkerPool:
     """``size`` isolated worker processes; runs queue for the next free one (first come,
-    first served). ``on_outcome(run_id, outcome)`` is called from the worker's thread."""
+    first served). ``on_outcome(run_id, outcome)`` is called from the worker's thread.
+
+    With ``prestart`` every worker starts with the pool; without, a slot starts its worker
+    when it takes its first run (which then waits for the warm-up) and keeps one from then on.
+    """
 
     def __init__(
         self,
@@ -332,15 +340,18 @@ class WorkerPool:
         queue: Any,
         on_outcome: OnOutcome,
         mp: SpawnContext,
+        *,
+        prestart: bool = True,
     ) -> None:
         self.context, self.queue, self.on_outcome, self.mp = context, queue, on_outcome, mp
+        self.prestart = prestart
         self.tasks: queue_module.Queue[int | None] = queue_module.Queue()
         self.closing = threading.Event()
         self._slots = [_Slot(self, i) for i in range(size)]
 
     def start(self) -> None:
-        """Start every worker now (each from its own thread, which lives as long as the pool:
-        a worker's parent-death signal is tied to the thread that started it)."""
+        """Start each slot's thread, which lives as long as the pool (a worker's parent-death
+        signal is tied to the thread that started it) and, with ``prestart``, its worker."""
         for slot in self._slots:
             slot.thread.start()
 
@@ -348,6 +359,10 @@ class WorkerPool:
         if self.closing.is_set():
             raise RuntimeError("the run workers are stopping")
         self.tasks.put(run_id)
+
+    def alive(self) -> int:
+        """How many of the workers are alive now."""
+        return sum(1 for s in self._slots if s.process is not None and s.process.is_alive())
 
     def executing(self) -> dict[int, int | None]:
         """The runs the workers execute now, with each worker's process id."""

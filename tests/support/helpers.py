@@ -121,12 +121,15 @@ def reference_run(
 
 
 def service_settings(database_url: str, **overrides: object) -> Settings:
-    """Settings of a test app: 2 run workers, no demo, fast cancel polling, and the
-    TestClient's host (``testserver``) among the allowed hosts."""
+    """Settings of a test app: 2 run workers, each started by the first run that needs it
+    (most test apps run few runs or none, and a worker's warm-up costs about 1 CPU-second),
+    no demo, fast cancel polling, and the TestClient's host (``testserver``) among the
+    allowed hosts."""
     base: dict[str, object] = {
         "database_url": database_url,
         "allowed_hosts": ["testserver"],
         "run_workers": 2,
+        "run_workers_prestart": False,
         "seed_demo": False,
         "cancel_poll_s": 0.05,
     }

@@ -36,6 +36,7 @@ def health(services: ServicesDep) -> HealthOut:
         version=_version(),
         auth_required=services.settings.auth_required,
         workers=services.settings.run_workers,
+        workers_alive=None if services.executor is None else services.executor.workers_alive(),
         loop_lag_ms=services.loop_lag.max_ms(),
         loop_cpu_s=services.loop_lag.cpu_s(),
     )
