@@ -22,7 +22,6 @@ class WorkerContext:
     series_points: int = 4000
     cancel_poll_s: float = 0.2
     version_fraction: float = 0.1
-    parent_pid: int | None = None  # exit when this process is gone (orphaned by kill -9)
     owner: str = "local"  # the executor whose attempt this is (runs.owner)
     heartbeat_s: float = 2.0  # an executing attempt proves it lives this often
     take_over: bool = False  # claim a run left running by a dead attempt (a Dask retry)

@@ -38,6 +38,7 @@ from app.runs.pool import Outcome, WorkerPool
 
 log = logging.getLogger("mapwise.runs")
 SHUTDOWN_WAIT_S = 15.0
+PREWARM = "app.runs.prewarm"  # what the workers' fork server imports before it forks one
 LOCAL = "local"
 
 
@@ -75,10 +76,11 @@ class RunExecutor(ExecutorBase):
             db,
             hub,
             owner=local_owner(),
-            parent_pid=os.getpid(),
             run_memory_mb=settings.run_memory_mb,
         )
-        self._mp = multiprocessing.get_context("spawn")
+        self._mp = multiprocessing.get_context("forkserver")
+        # "__main__" too: each worker would otherwise import the server's main module again
+        self._mp.set_forkserver_preload(["__main__", PREWARM])
         self._queue: Any = None
         self._pool: WorkerPool | None = None
         self._pump: threading.Thread | None = None

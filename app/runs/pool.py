@@ -1,9 +1,13 @@
 """The local executor's worker processes: isolated, replaced when they die, memory-limited.
 
-A :class:`WorkerPool` keeps ``size`` long-lived worker processes (spawned, warmed up once:
-importing and loading numba's cache costs seconds, so a process per run would be slow). Each
-has its own pipe and its own thread in the server, which hands it one run at a time and
-waits for the run's outcome *or the process's death*. A dead worker therefore affects only
+A :class:`WorkerPool` keeps ``size`` long-lived worker processes. Importing the numerics and
+loading numba's cached kernels costs about a CPU-second, so it is done once, in a fork
+server (:mod:`app.runs.prewarm`, started by the executor with the first worker), and every
+worker is forked from it warm: a worker killed mid-run is replaced in milliseconds, and the
+workers share the loaded code's pages. The server itself never loads the numerics. Each
+worker has its own pipe and its own thread in the server, which hands it one run at a time
+and waits for the run's outcome *or the process's death*. A worker exits when the server is
+gone, however it ended (:func:`watch_lifeline`). A dead worker therefore affects only
 the run it was executing (unlike ``ProcessPoolExecutor``, where one dead process breaks the
 pool and every run in it): the thread reports that run's outcome as a death, with the
 attempt the worker had claimed, and starts a new worker. Each run executes under the OS
@@ -25,7 +29,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from multiprocessing import connection as mp_connection
 from multiprocessing.connection import Connection
-from multiprocessing.context import SpawnContext, SpawnProcess
+from multiprocessing.context import BaseContext
+from multiprocessing.process import BaseProcess
 from typing import Any, NoReturn
 
 import numpy as np
@@ -66,15 +71,27 @@ def set_process_name(name: str) -> None:
 
 
 def watch_parent(parent_pid: int) -> None:
+    """Exit (code 70) once this process's parent is no longer ``parent_pid``: it is gone."""
     while True:
         if os.getppid() != parent_pid:
             os._exit(70)
         time.sleep(0.1)
 
 
-def warm_up() -> int:
-    """Loads the compiled kernels of the map filters (numba's cache) so the first run does
-    not wait for them."""
+def watch_lifeline(lifeline: Connection) -> None:
+    """Exit (code 70) once ``lifeline`` reads end-of-file: the server, which alone holds its
+    other end, is gone (killed with ``kill -9`` too). A worker's parent is the fork server,
+    which outlives the server for as long as a worker does, so it cannot be watched instead."""
+    with contextlib.suppress(EOFError, OSError):
+        while True:
+            lifeline.recv()  # the server never writes: this returns only at its end
+    os._exit(70)
+
+
+def load_kernels() -> None:
+    """Load the compiled kernels of the map filters (numba's cache), so the first run does
+    not wait for them: done once in the fork server (:mod:`app.runs.prewarm`), and again,
+    at no cost then, in each worker (a worker spawned afresh loads them there)."""
     from estimation.registry import EstimatorKind, get_spec, names
     from estimation.signals import Signals
 
@@ -83,6 +100,11 @@ def warm_up() -> int:
     config = {"axes": [{"name": "u", "breakpoints": [0.0, 1.0]}], "output": "y"}
     for name in names(EstimatorKind.MAP_FILTER):
         get_spec(name).build(config).fit(signals)
+
+
+def warm_up() -> int:
+    """Make this worker ready for its first run: the kernels and pyarrow's memory pool."""
+    load_kernels()
     touch_arrow_memory_pool()
     return os.getpid()
 
@@ -103,7 +125,7 @@ def touch_arrow_memory_pool() -> None:
     pq.ParquetFile(sink).read_row_group(0)  # as a run reads (pq.read_table imports pandas)
 
 
-def worker_main(context: WorkerContext, queue: Any, conn: Connection) -> None:
+def worker_main(context: WorkerContext, queue: Any, conn: Connection, lifeline: Connection) -> None:
     """A worker process: warm up, then execute the run ids received on ``conn`` one by one,
     telling the server ``("claimed", attempt)`` and then ``("done", status, retire)`` or
     ``("error", message, retire)``; ``None`` ends it. ``retire``: the worker exits after
@@ -114,8 +136,7 @@ def worker_main(context: WorkerContext, queue: Any, conn: Connection) -> None:
 
     set_parent_death_signal()
     set_process_name("mw-idle")
-    if context.parent_pid is not None:
-        threading.Thread(target=watch_parent, args=(context.parent_pid,), daemon=True).start()
+    threading.Thread(target=watch_lifeline, args=(lifeline,), daemon=True).start()
 
     def publish(message: dict[str, Any]) -> None:
         with contextlib.suppress(Exception):  # a full queue drops the frame, never blocks
@@ -189,7 +210,7 @@ def how_it_ended(exitcode: int | None) -> str:
     return f"exited with code {exitcode}"
 
 
-def collect(process: SpawnProcess) -> str:
+def collect(process: BaseProcess) -> str:
     """Wait up to :data:`STOP_WAIT_S` for ``process`` to end, kill it if it has not; how it
     ended."""
     process.join(timeout=STOP_WAIT_S)
@@ -204,7 +225,7 @@ class _Slot:
 
     def __init__(self, pool: WorkerPool, index: int) -> None:
         self.pool, self.index = pool, index
-        self.process: SpawnProcess | None = None
+        self.process: BaseProcess | None = None
         self.conn: Connection | None = None
         self.run_id: int | None = None  # the run its worker executes now
         self.start_failures = 0  # consecutive start-ups that ended in an error exit
@@ -220,12 +241,18 @@ class _Slot:
         parent, child = self.pool.mp.Pipe()
         process = self.pool.mp.Process(
             target=worker_main,
-            args=(self.pool.context, self.pool.queue, child),
+            args=(self.pool.context, self.pool.queue, child, self.pool.lifeline),
             name=f"mapwise-run-worker-{self.index}",
             daemon=True,
         )
-        process.start()
-        child.close()
+        try:
+            process.start()
+        except Exception:  # e.g. the fork server could not start: back off before the next
+            parent.close()
+            self.start_failures += 1
+            raise
+        finally:
+            child.close()
         self.process, self.conn = process, parent
 
     def _reap(self) -> str:
@@ -339,19 +366,22 @@ class WorkerPool:
         context: WorkerContext,
         queue: Any,
         on_outcome: OnOutcome,
-        mp: SpawnContext,
+        mp: BaseContext,
         *,
         prestart: bool = True,
     ) -> None:
         self.context, self.queue, self.on_outcome, self.mp = context, queue, on_outcome, mp
         self.prestart = prestart
+        # Each worker gets the reading end; the server keeps the writing end, never writes,
+        # and so closes it only by ending (watch_lifeline).
+        self.lifeline, self._lifeline_held = mp.Pipe(duplex=False)
         self.tasks: queue_module.Queue[int | None] = queue_module.Queue()
         self.closing = threading.Event()
         self._slots = [_Slot(self, i) for i in range(size)]
 
     def start(self) -> None:
-        """Start each slot's thread, which lives as long as the pool (a worker's parent-death
-        signal is tied to the thread that started it) and, with ``prestart``, its worker."""
+        """Start each slot's thread, which lives as long as the pool, and, with ``prestart``,
+        its worker."""
         for slot in self._slots:
             slot.thread.start()
 
@@ -392,4 +422,5 @@ class WorkerPool:
                     process.kill()
         for slot in late:
             slot.thread.join(STOP_WAIT_S)
+        self._lifeline_held.close()  # any worker still there ends (watch_lifeline)
         return not late

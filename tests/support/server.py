@@ -29,6 +29,7 @@ TABLE = {"axes": [{"name": "u1", "breakpoints": U1}, {"name": "u2", "breakpoints
 FINISHED = ("succeeded", "failed", "cancelled", "interrupted")
 PORT_ATTEMPTS = 5
 DATASET_CHILD = "mw-datasets"  # app.services.dataset_child.PROCESS_NAME (this imports no app)
+WORKER_NAMES = ("mw-idle", "mw-run-")  # what a run worker calls itself (app/runs/pool.py)
 
 
 class PortTakenError(RuntimeError):
@@ -204,18 +205,31 @@ class Server:
             out += [int(x) for x in text]
         return out
 
-    def workers(self) -> list[int]:
-        """Process ids of the server's run workers: its spawned processes but the dataset
-        child (``mw-datasets``, app/services/dataset_child.py)."""
-        out = []
-        for pid in self.children():
+    def descendants(self) -> list[int]:
+        """Process ids of the server's children, theirs, and so on: the dataset child, the
+        run workers' fork server and the workers it forked."""
+        out: list[int] = []
+        parents = [self.process.pid]
+        while parents:
+            pid = parents.pop()
             try:
-                spawned = b"spawn_main" in Path(f"/proc/{pid}/cmdline").read_bytes()
-                if spawned and Path(f"/proc/{pid}/comm").read_text().strip() != DATASET_CHILD:
-                    out.append(pid)
+                tasks = list(Path(f"/proc/{pid}/task").iterdir())
+                found = [int(x) for t in tasks for x in (t / "children").read_text().split()]
             except OSError:  # gone meanwhile
-                pass
+                continue
+            out += found
+            parents += found
         return out
+
+    def workers(self) -> list[int]:
+        """Process ids of the server's run workers: the descendants that call themselves
+        ``mw-idle`` or ``mw-run-<id>`` (app/runs/pool.py; a worker names itself as soon as
+        it is forked)."""
+        return [pid for pid in self.descendants() if _comm(pid).startswith(WORKER_NAMES)]
+
+    def dataset_child(self) -> int | None:
+        """The dataset child's process id (``mw-datasets``), if it runs."""
+        return next((p for p in self.children() if _comm(p) == DATASET_CHILD), None)
 
     def wait_versions(self, run_id: int, n: int, timeout: float = 60.0) -> None:
         """Until run ``run_id`` has persisted ``n`` map versions."""
@@ -272,3 +286,11 @@ def is_dead(pid: int) -> bool:
     except FileNotFoundError:
         return True
     return state in ("Z", "X")
+
+
+def _comm(pid: int) -> str:
+    """What process ``pid`` calls itself (``/proc/<pid>/comm``); empty once it is gone."""
+    try:
+        return Path(f"/proc/{pid}/comm").read_text().strip()
+    except OSError:
+        return ""

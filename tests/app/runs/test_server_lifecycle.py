@@ -56,7 +56,7 @@ def test_kill_9_mid_run_then_resume_gives_the_uninterrupted_map(
         expected = first.get(f"/api/runs/{reference}/export", params={"format": "json"})
         run_id = _start(first, run_body(dataset, pace=10, version_every={"samples": 500}))
         first.wait_versions(run_id, 3)
-        workers = first.children()
+        workers = first.descendants()
         first.kill()
     except BaseException:
         first.stop()

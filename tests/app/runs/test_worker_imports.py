@@ -1,6 +1,7 @@
 """What a run worker imports: the numerics, the database and the store, never the web layer
-(docs/reliability.md#api-memory). Every spawned worker pays for what it imports, and a worker
-is spawned again after each crash, kill or retirement."""
+(docs/reliability.md#api-memory). The workers' fork server imports it all once
+(``app.runs.prewarm``), and every worker, including each replacement after a crash, kill or
+retirement, is forked from it with what it holds."""
 
 from __future__ import annotations
 
@@ -14,8 +15,8 @@ WEB = ("fastapi", "starlette", "uvicorn", "httptools", "multipart", "python_mult
 def test_the_run_worker_imports_no_web_framework() -> None:
     probe = (
         "import json, sys\n"
-        "from app.runs.pool import worker_main, warm_up\n"
-        "from app.runs.worker import execute_run\n"
+        "import app.cli.main\n"  # `mapwise serve`'s main module, which the fork server preloads
+        "import app.runs.prewarm\n"
         "print(json.dumps(sorted(sys.modules)))\n"
     )
     done = subprocess.run(
