@@ -14,13 +14,13 @@ export class Router {
     this.cleanup = null;
     this.controller = null;
     this.current = null;
-    this.rendered = 0;
+    this.settled = false; // a view has finished mounting
   }
 
   start() {
-    window.addEventListener("popstate", () => this.render());
+    window.addEventListener("popstate", () => this.render({ focus: true }));
     document.addEventListener("click", (event) => this.intercept(event));
-    return this.render();
+    return this.render({ focus: false });
   }
 
   /** Follow same-origin links to app routes without a page load. */
@@ -54,14 +54,18 @@ export class Router {
     return null;
   }
 
-  /** Go to `to` (path + query). replace=true rewrites the current history entry. */
-  navigate(to, { replace = false } = {}) {
+  /**
+   * Go to `to` (path + query). replace=true rewrites the current history entry. The new
+   * page's heading takes the focus (`focus`), except after a redirect while the first page
+   * is still loading, which is part of that load.
+   */
+  navigate(to, { replace = false, focus } = {}) {
     const current = window.location.pathname + window.location.search;
     if (to !== current) {
       if (replace) history.replaceState(null, "", to);
       else history.pushState(null, "", to);
     }
-    return this.render();
+    return this.render({ focus: focus ?? (this.settled || !replace) });
   }
 
   /** Update the query string of the current view without re-mounting it. */
@@ -78,10 +82,11 @@ export class Router {
     else history.pushState(null, "", to);
   }
 
-  async render() {
+  /** Mount the view of the current URL; `focus`: move the focus to its heading after. */
+  async render({ focus = true } = {}) {
     const { pathname, search } = window.location;
     const found = this.match(pathname);
-    if (found?.route.redirect) return this.navigate(found.route.redirect, { replace: true });
+    if (found?.route.redirect) return this.navigate(found.route.redirect, { replace: true, focus });
 
     this.controller?.abort();
     try {
@@ -113,10 +118,13 @@ export class Router {
       console.warn(err);
       this.root.replaceChildren(errorPanel(err));
     }
-    if (!ctx.signal.aborted) performance.mark(MARK.viewMounted, { detail: { path: pathname } });
+    if (ctx.signal.aborted) return;
+    this.settled = true;
+    performance.mark(MARK.viewMounted, { detail: { path: pathname } });
     // Move focus to the new page's heading after in-app navigation (not on first load,
-    // where the browser's own start of the page is right for keyboard and screen readers).
-    if (!ctx.signal.aborted && this.rendered++ > 0) {
+    // where the browser's own start of the page is right for keyboard and screen readers),
+    // also when the user navigated before the first page had finished loading.
+    if (focus) {
       const heading = this.root.querySelector(SEL.pageTitle) || document.querySelector(SEL.main);
       heading?.focus({ preventScroll: true });
     }

@@ -3,10 +3,11 @@ every control, works from the keyboard; history navigation; cold and cached load
 
 from __future__ import annotations
 
+import contextlib
 import uuid
 
 import pytest
-from playwright.sync_api import Page, expect
+from playwright.sync_api import Error, Page, Route, expect
 
 from tests.frontend.browser import shot, upload_example, wait_run
 from tests.frontend.page_load import measure_loads, views
@@ -93,6 +94,35 @@ def test_keyboard_only_navigation_and_history(page: Page, finished_run: dict) ->
     page.keyboard.press("Escape")
     expect(menu).to_be_focused()
     expect(menu).to_have_attribute("aria-expanded", "false")
+
+
+def test_navigating_before_the_first_page_has_loaded_still_moves_the_focus(page: Page) -> None:
+    """A user who leaves the first page while its data are still loading (a slow server)
+    lands on the new page's heading, as after any in-app navigation: the first page's list
+    request is held until the new page has mounted."""
+    held: list[Route] = []
+
+    def hold_the_first(route: Route) -> None:
+        if held:
+            route.continue_()
+        else:
+            held.append(route)
+
+    page.route("**/api/datasets?*", hold_the_first)
+    page.goto("/datasets")
+    expect(page.locator("[data-page-title]")).to_have_text("Datasets")
+    for _ in range(400):  # the Datasets view asks for its list, and waits for it
+        if held:
+            break
+        page.wait_for_timeout(50)
+    assert len(held) == 1
+    nav_new_run = page.get_by_role("navigation", name="Main").get_by_role("link", name="New run")
+    nav_new_run.focus()
+    page.keyboard.press("Enter")
+    expect(page.locator("[data-page-title]")).to_have_text("New run")
+    expect(page.locator("[data-page-title]")).to_be_focused()
+    with contextlib.suppress(Error):  # the left page's request was aborted meanwhile
+        held[0].continue_()
 
 
 def test_every_view_renders_cold_and_warm_and_reloads_from_the_cache(
