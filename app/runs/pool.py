@@ -48,8 +48,9 @@ RETIRE_FRACTION = 0.25  # a worker holding this much of a run budget more than w
 
 
 def set_parent_death_signal() -> None:
-    """Linux: SIGKILL this worker when the server's thread that started it dies (``kill -9``
-    of the server included)."""
+    """Linux: SIGKILL this worker when the thread that forked it dies: the fork server's,
+    which ends after the server and its workers are gone (so the lifeline of
+    :func:`watch_lifeline` is what ends a worker with the server; this is the backstop)."""
     try:
         import ctypes
 
