@@ -48,9 +48,9 @@ RETIRE_FRACTION = 0.25  # a worker holding this much of a run budget more than w
 
 
 def set_parent_death_signal() -> None:
-    """Linux: SIGKILL this worker when the thread that forked it dies: the fork server's,
-    which ends after the server and its workers are gone (so the lifeline of
-    :func:`watch_lifeline` is what ends a worker with the server; this is the backstop)."""
+    """Linux: SIGKILL this worker when the thread that forked it dies: the fork server's.
+    That happens only if the fork server itself is killed (it outlives the server while a
+    worker lives), so :func:`watch_lifeline` is what ends a worker with the server."""
     try:
         import ctypes
 
