@@ -2,8 +2,8 @@
 
     .venv/bin/python scripts/worker_start.py --repeat 5
 
-starts the fork server the local executor uses (``forkserver`` with the main module and
-``app.runs.prewarm`` preloaded, as :class:`app.runs.executor.RunExecutor` does) and times
+starts the fork server the local executor uses (``forkserver`` with ``app.runs.prewarm``
+preloaded, as :class:`app.runs.executor.RunExecutor` does) and times
 it, then times ``--repeat`` child processes that each do what a worker does before it takes a run
 (:func:`app.runs.pool.warm_up`), first forked from that server and then spawned as fresh
 interpreters (the start method the pool used before). Prints wall seconds as JSON: the fork
@@ -22,11 +22,12 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from app.runs.executor import PREWARM
-from app.runs.pool import warm_up
-
 
 def _time_children(method: str, repeat: int) -> list[float]:
+    # Imported here, not at the top: each child imports this script again as its main
+    # module, and a server's main module (`mapwise`) is preloaded in the fork server.
+    from app.runs.pool import warm_up
+
     context = multiprocessing.get_context(method)
     seconds = []
     for _ in range(repeat):
@@ -46,8 +47,10 @@ def main() -> None:
     args = parser.parse_args()
     if not 1 <= args.repeat <= 50:
         parser.error("--repeat must be 1 to 50")
+    from app.runs.executor import PREWARM
+
     forkserver = multiprocessing.get_context("forkserver")
-    forkserver.set_forkserver_preload(["__main__", PREWARM])
+    forkserver.set_forkserver_preload([PREWARM])
     start = time.monotonic()
     first = forkserver.Process(target=time.sleep, args=(0,))
     first.start()  # starts the fork server, which imports PREWARM before it forks

@@ -79,8 +79,7 @@ class RunExecutor(ExecutorBase):
             run_memory_mb=settings.run_memory_mb,
         )
         self._mp = multiprocessing.get_context("forkserver")
-        # "__main__" too: each worker would otherwise import the server's main module again
-        self._mp.set_forkserver_preload(["__main__", PREWARM])
+        self._mp.set_forkserver_preload([PREWARM])
         self._queue: Any = None
         self._pool: WorkerPool | None = None
         self._pump: threading.Thread | None = None

@@ -4,8 +4,14 @@ map filters' compiled kernels, loaded once, so every worker forked from the serv
 (:mod:`app.runs.pool`). The fork server is its own process: the API server never imports this.
 
 Nothing here may start a thread: a process is forked from this one.
+
+``app.cli.main`` is here because each forked worker imports the server's main script again
+(multiprocessing's ``prepare``; for ``mapwise serve`` that script imports ``app.cli.main``),
+and would otherwise do so from scratch. Naming ``"__main__"`` in the preload list instead
+does nothing on Python 3.11, whose fork server is never told the main script's path.
 """
 
+import app.cli.main  # noqa: F401
 from app.runs.pool import load_kernels, worker_main
 from app.runs.worker import execute_run
 
