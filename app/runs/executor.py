@@ -145,7 +145,7 @@ class RunExecutor(ExecutorBase):
 
     def workers_alive(self) -> int | None:
         """Run worker processes alive now (fewer than ``run_workers`` before the first runs
-        without prestart, or while a dead one is replaced)."""
+        without prestart; a dead one counts until its slot notices, within about a second)."""
         pool = self._pool
         return 0 if pool is None else pool.alive()
 

@@ -392,8 +392,10 @@ class WorkerPool:
         self.tasks.put(run_id)
 
     def alive(self) -> int:
-        """How many of the workers are alive now."""
-        return sum(1 for s in self._slots if s.process is not None and s.process.is_alive())
+        """How many workers are started and not yet collected. Read from the slots' own
+        bookkeeping: only a slot's thread may poll its process (two pollers of a forked
+        process race for its exit status, and the loser records 255)."""
+        return sum(1 for s in self._slots if s.process is not None)
 
     def executing(self) -> dict[int, int | None]:
         """The runs the workers execute now, with each worker's process id."""
