@@ -47,13 +47,12 @@ def main() -> None:
     args = parser.parse_args()
     if not 1 <= args.repeat <= 50:
         parser.error("--repeat must be 1 to 50")
-    from app.runs.executor import PREWARM
+    from app.runs.pool import warm_context
 
-    forkserver = multiprocessing.get_context("forkserver")
-    forkserver.set_forkserver_preload([PREWARM])
+    forkserver = warm_context()
     start = time.monotonic()
     first = forkserver.Process(target=time.sleep, args=(0,))
-    first.start()  # starts the fork server, which imports PREWARM before it forks
+    first.start()  # starts the fork server, which imports app.runs.prewarm first
     first.join()
     server_s = time.monotonic() - start
     report: dict[str, object] = {"fork_server_start_s": round(server_s, 3)}

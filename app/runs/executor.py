@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import multiprocessing
 import os
 import queue as queue_module
 import socket
@@ -34,11 +33,10 @@ from app.domain import RunStatus
 from app.runs.frames import StatusFrame
 from app.runs.hub import LiveHub
 from app.runs.lost_runs import ExecutorBase
-from app.runs.pool import Outcome, WorkerPool
+from app.runs.pool import Outcome, WorkerPool, warm_context
 
 log = logging.getLogger("mapwise.runs")
 SHUTDOWN_WAIT_S = 15.0
-PREWARM = "app.runs.prewarm"  # what the workers' fork server imports before it forks one
 LOCAL = "local"
 
 
@@ -78,8 +76,7 @@ class RunExecutor(ExecutorBase):
             owner=local_owner(),
             run_memory_mb=settings.run_memory_mb,
         )
-        self._mp = multiprocessing.get_context("forkserver")
-        self._mp.set_forkserver_preload([PREWARM])
+        self._mp = warm_context()
         self._queue: Any = None
         self._pool: WorkerPool | None = None
         self._pump: threading.Thread | None = None

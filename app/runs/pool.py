@@ -20,6 +20,7 @@ from __future__ import annotations
 import contextlib
 import io
 import logging
+import multiprocessing
 import os
 import queue as queue_module
 import signal
@@ -42,6 +43,16 @@ log = logging.getLogger("mapwise.runs")
 IDLE_CHECK_S = 1.0  # how often an idle worker's thread checks that its process lives
 STOP_WAIT_S = 5.0  # how long a worker told to exit has to do so before it is killed
 RETIRE_FRACTION = 0.25  # a worker holding this much of a run budget more than when warm exits
+PREWARM = "app.runs.prewarm"  # what the fork server imports before it forks a process
+
+
+def warm_context() -> BaseContext:
+    """The multiprocessing context of the run workers and the dataset child: processes forked
+    from one fork server per server process, started at the first of them, which has
+    imported :mod:`app.runs.prewarm` (the numerics and their kernels) once for all."""
+    context = multiprocessing.get_context("forkserver")
+    context.set_forkserver_preload([PREWARM])
+    return context
 
 
 # -- in the worker process --------------------------------------------------------------------
@@ -71,18 +82,11 @@ def set_process_name(name: str) -> None:
         pass
 
 
-def watch_parent(parent_pid: int) -> None:
-    """Exit (code 70) once this process's parent is no longer ``parent_pid``: it is gone."""
-    while True:
-        if os.getppid() != parent_pid:
-            os._exit(70)
-        time.sleep(0.1)
-
-
 def watch_lifeline(lifeline: Connection) -> None:
     """Exit (code 70) once ``lifeline`` reads end-of-file: the server, which alone holds its
-    other end, is gone (killed with ``kill -9`` too). A worker's parent is the fork server,
-    which outlives the server for as long as a worker does, so it cannot be watched instead."""
+    other end, is gone (killed with ``kill -9`` too). A forked process's parent is the fork
+    server, which outlives the server for as long as such a process does, so it cannot be
+    watched instead. Run workers and the dataset child both watch one."""
     with contextlib.suppress(EOFError, OSError):
         while True:
             lifeline.recv()  # the server never writes: this returns only at its end

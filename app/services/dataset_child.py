@@ -5,7 +5,7 @@ Simulating a scenario integrates a plant in numba kernels: executed in the API p
 would load numba and LLVM there (about 120 MiB, never given back) and hold a whole simulated
 log. An upload that cannot stream (an MCAP, MDF or non-dense CSV log, or one with a raster)
 is parsed whole: asammdf alone loads pandas (about 55 MiB), and the parse holds several
-times the file. A :class:`DatasetChild` keeps one spawned child for both, started at the
+times the file. A :class:`DatasetChild` keeps one child for both, started at the
 first such request and kept for the next ones (so the plant runs it caches,
 :mod:`estimation.plants.airpath`, serve them too). The child simulates or parses, stores
 the dataset exactly as the in-process path does (:meth:`DatasetService.simulate_here
@@ -17,8 +17,12 @@ turns in it, one at a time.
   upload that needs more is a 413.
 - An upload reaches the child as the server's open file (its descriptor passed over the
   pipe, :func:`multiprocessing.reduction.send_handle`), as a path, or as bytes.
-- The child ends with the server: it watches its parent and reads the end of its pipe; a
-  server that stops mid-request kills it.
+- The child is forked from the run workers' fork server (:func:`app.runs.pool.warm_context`),
+  which has imported the numerics once: it is ready in milliseconds, where a spawned one
+  took about 2 CPU-seconds to import them.
+- The child ends with the server: it watches a lifeline pipe whose other end only the
+  server holds (:func:`app.runs.pool.watch_lifeline`) and reads the end of its request pipe;
+  a server that stops mid-request kills it.
 - A simulation's progress crosses through three shared integers (``done``, ``total``,
   ``stage``), copied into the caller's :class:`~estimation.progress.Progress` while the
   server waits.
@@ -32,13 +36,12 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import multiprocessing
 import os
 import threading
 from dataclasses import dataclass
 from multiprocessing import reduction
 from multiprocessing.connection import Connection, wait
-from multiprocessing.context import SpawnProcess
+from multiprocessing.process import BaseProcess
 from pathlib import Path
 from typing import Any, BinaryIO
 
@@ -47,6 +50,7 @@ import numpy as np
 from app import errors
 from app.errors import AppError, InvalidRequestError, PayloadTooLargeError
 from app.runs.limits import out_of_memory_message
+from app.runs.pool import warm_context
 from estimation.errors import EstimationError
 from estimation.mismatch import MismatchLevel
 from estimation.progress import Progress
@@ -117,19 +121,25 @@ def _child_main(
     memory_mb: float | None,
     shared: Any,
     conn: Connection,
-    parent_pid: int,
+    lifeline: Connection,
 ) -> None:
     """The child: for each request received, execute it, then send ``("ok", id)`` or
     ``("error", class name, message, field, status, code)``; ends at ``None`` or when the
     server is gone."""
     from app.db.engine import Database
     from app.runs.limits import memory_limit
-    from app.runs.pool import set_process_name, touch_arrow_memory_pool, watch_parent
+    from app.runs.pool import (
+        set_parent_death_signal,
+        set_process_name,
+        touch_arrow_memory_pool,
+        watch_lifeline,
+    )
     from app.services.datasets import DatasetService
     from app.store import open_store
 
+    set_parent_death_signal()
     set_process_name(PROCESS_NAME)
-    threading.Thread(target=watch_parent, args=(parent_pid,), daemon=True).start()
+    threading.Thread(target=watch_lifeline, args=(lifeline,), daemon=True).start()
     touch_arrow_memory_pool()  # pyarrow's reservation is not a request's memory
     db = Database(database_url)
     service = DatasetService(db, open_store(store_url))
@@ -221,12 +231,15 @@ class DatasetChild:
 
     def __init__(self, database_url: str, store_url: str, memory_mb: float | None) -> None:
         self.database_url, self.store_url, self.memory_mb = database_url, store_url, memory_mb
-        self._mp = multiprocessing.get_context("spawn")
+        self._mp = warm_context()
         self._shared = self._mp.RawArray("q", 3)
         self._view = np.frombuffer(self._shared, dtype=np.int64)
         self._turn = threading.Lock()  # one request at a time in the child
-        self._process: SpawnProcess | None = None
+        self._process: BaseProcess | None = None
         self._conn: Connection | None = None
+        # The child gets the reading end; the server never writes to the other, which closes
+        # only when the server ends, however it ends (watch_lifeline).
+        self._lifeline, self._lifeline_held = self._mp.Pipe(duplex=False)
 
     def simulate(self, request: SimulationRequest, progress: Progress | None) -> int:
         """Simulate and store ``request`` in the child; the new dataset's id."""
@@ -287,7 +300,7 @@ class DatasetChild:
     def pid(self) -> int | None:
         return None if self._process is None else self._process.pid
 
-    def _started(self) -> tuple[SpawnProcess, Connection]:
+    def _started(self) -> tuple[BaseProcess, Connection]:
         if self._process is not None and not self._process.is_alive():
             self._reap()
         if self._process is None or self._conn is None:
@@ -300,7 +313,7 @@ class DatasetChild:
                     self.memory_mb,
                     self._shared,
                     child,
-                    os.getpid(),
+                    self._lifeline,
                 ),
                 name="mapwise-datasets",
                 daemon=True,

@@ -229,7 +229,7 @@ class Server:
 
     def dataset_child(self) -> int | None:
         """The dataset child's process id (``mw-datasets``), if it runs."""
-        return next((p for p in self.children() if _comm(p) == DATASET_CHILD), None)
+        return next((p for p in self.descendants() if _comm(p) == DATASET_CHILD), None)
 
     def wait_versions(self, run_id: int, n: int, timeout: float = 60.0) -> None:
         """Until run ``run_id`` has persisted ``n`` map versions."""
