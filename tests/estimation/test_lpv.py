@@ -221,6 +221,34 @@ def test_class_and_functions_agree_and_only_active_cells_move():
     assert np.all(st0.theta == 0.0)  # the input state is not mutated
 
 
+def _short_whtc() -> tuple[Signals, dict]:
+    """60 s of ``maf-whtc`` and its config for ``lpv`` (ρ from the observer's model)."""
+    scenario = get_scenario("maf-whtc")
+    data = scenario.build(seed=0, duration_s=60.0, mismatch="nominal")
+    return data.signals, scenario.default_config("lpv", data)
+
+
+@pytest.mark.parametrize("rho_source", ["channels", "model"])
+def test_the_first_state_takes_its_gain_from_the_prepared_box(rho_source):
+    """``prepare`` carries the log's ρ box, so the first state designs its gain without
+    computing ρ over the log again: the same box, mean T_em and gain as ``design_gain``."""
+    if rho_source == "channels":
+        sig, config = _signals(n=300)[0], {"rho_source": "channels"}
+    else:
+        sig, config = _short_whtc()
+    obs = LPV_SPECS[0].build(config)
+    assert obs.config.rho_source == rho_source
+    prep = obs.prepare(sig)
+    rho, t_em = obs.scheduling(sig)
+    assert prep.box is not None
+    assert_array_equal(prep.box.rho_min, rho.min(axis=0))
+    assert_array_equal(prep.box.rho_max, rho.max(axis=0))
+    assert prep.box.t_em_k == t_em
+    assert_array_equal(prep.box.accept, prep.accept)
+    state = obs.initial_state(sig, prep)
+    assert_array_equal(state.L_scaled, obs.design_gain(sig).L_scaled)
+
+
 def test_config_errors_name_the_problem():
     with pytest.raises(ConfigError, match="eps1 \\+ eps2"):
         LPV_SPECS[0].build({"eps1": 1.5, "eps2": 0.6})
