@@ -4,13 +4,13 @@ with the SKF paper's case-study settings (SKF (34); the same run as ``scripts/st
 
 from __future__ import annotations
 
-import multiprocessing
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from app.config import Settings
 from app.db.engine import Database
 from app.runs.context import WorkerContext
+from app.runs.pool import warm_context
 from app.services.datasets import DatasetService
 from app.services.run_plan import RunRequest
 from app.services.runs import RunService
@@ -43,8 +43,8 @@ class _RunNow:
         self.context = context
 
     def submit(self, run_id: int) -> None:
-        spawn = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=1, mp_context=spawn) as child:
+        # Forked from the run workers' fork server, which the server's executor then reuses.
+        with ProcessPoolExecutor(max_workers=1, mp_context=warm_context()) as child:
             child.submit(_execute, run_id, self.context).result()
 
     def deliver_local(self, message: dict) -> None:
