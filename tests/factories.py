@@ -9,6 +9,8 @@ references in ``tests/estimation/reference.py`` read exactly the same problem.
 
 from __future__ import annotations
 
+import dataclasses
+import itertools
 import math
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -211,3 +213,53 @@ def random_problem(
         limit=limit,
         sensor=sensor,
     )
+
+
+@dataclass(frozen=True)
+class ChunkedRun:
+    """A map filter run over a :class:`Problem` in chunks: the state after each chunk, each
+    chunk's predictions, statuses and innovation variances, and the regressor's cells."""
+
+    states: list[Any]
+    outputs: list[tuple[np.ndarray, np.ndarray, np.ndarray]]
+    idx: np.ndarray
+
+
+def run_in_chunks(
+    kind: str, problem: Problem, chunk: int, *, specialised: bool = True
+) -> ChunkedRun:
+    """Filter ``kind`` over ``problem``, one :func:`run_chunk` call per ``chunk`` samples,
+    carrying the state between the calls."""
+    from estimation.filters.functions import run_chunk
+
+    estimator = get_spec(kind).build(problem.config(kind))
+    prepared = estimator.prepare(problem.signals(), problem.accept)
+    state = estimator.initial_state(prepared)
+    n = prepared.y.size
+    bounds = [*range(0, n, chunk), n]
+    run = ChunkedRun([], [], prepared.idx)
+    for start, stop in itertools.pairwise(bounds):
+        sl = slice(start, stop)
+        s_out = np.empty(stop - start)
+        state, yhat, status = run_chunk(
+            state,
+            prepared.idx[sl],
+            prepared.w[sl],
+            prepared.y[sl],
+            prepared.accept[sl],
+            prepared.settings,
+            s_out=s_out,
+            specialised=specialised,
+        )
+        run.states.append(state)
+        run.outputs.append((yhat, status, s_out))
+    return run
+
+
+def state_bytes(state: Any) -> dict[str, bytes | object]:
+    """A filter state's fields, arrays as their bytes: equal only if bit-identical."""
+    return {
+        f.name: (v.tobytes() if isinstance(v, np.ndarray) else v)
+        for f in dataclasses.fields(state)
+        for v in [getattr(state, f.name)]
+    }

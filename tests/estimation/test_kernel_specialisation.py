@@ -5,20 +5,23 @@ innovation gate, the accept mask, locked cells and covariance limiting."""
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 from numba.core import types as nb_types
 
-from estimation.filters.functions import run_chunk
 from estimation.filters.state import FilterState
 from estimation.kernels.gain_only import nlms_kernel, sskf_kernel
 from estimation.kernels.kalman import ACCEPTED, REJECTED_GATE, REJECTED_MASK, kf_kernel
 from estimation.kernels.local import local_kernel
 from estimation.kernels.specialise import corner_token
-from estimation.registry import get_spec
-from tests.factories import KINDS, SENSOR_KINDS, Sensor, random_problem
+from tests.factories import (
+    KINDS,
+    SENSOR_KINDS,
+    Sensor,
+    random_problem,
+    run_in_chunks,
+    state_bytes,
+)
 
 SHAPES = {"1d": (9,), "2d": (5, 4), "3d": (4, 3, 3), "4d": (3, 2, 2, 3)}
 SENSOR = Sensor(lag=0.8, delay=3, sigma_f=0.2)
@@ -37,40 +40,13 @@ KERNELS |= {"sskf": sskf_kernel, "nlms": nlms_kernel}
 def _run_in_chunks(
     kind: str, dims: str, sensor: Sensor | None, limit: bool, *, specialised: bool
 ) -> tuple[list[FilterState], list[np.ndarray], np.ndarray]:
-    """Three chunks (so the state carried between calls is compared too); the problem has
-    outliers for the gate, a 10 % mask and two locked cells."""
+    """Three chunks of 200 samples or fewer (so the state carried between calls is compared
+    too); the problem has outliers for the gate, a 10 % mask and two locked cells."""
     problem = random_problem(
         7, shape=SHAPES[dims], n=600, limit=limit, sensor=sensor, mask_rate=0.1
     )
-    estimator = get_spec(kind).build(problem.config(kind))
-    prepared = estimator.prepare(problem.signals(), problem.accept)
-    state = estimator.initial_state(prepared)
-    states, outputs = [], []
-    n = prepared.y.size
-    for start, stop in ((0, n // 3), (n // 3, 2 * n // 3), (2 * n // 3, n)):
-        sl = slice(start, stop)
-        s_out = np.empty(stop - start)
-        state, yhat, status = run_chunk(
-            state,
-            prepared.idx[sl],
-            prepared.w[sl],
-            prepared.y[sl],
-            prepared.accept[sl],
-            prepared.settings,
-            s_out=s_out,
-            specialised=specialised,
-        )
-        states.append(state)
-        outputs += [yhat, status, s_out]
-    return states, outputs, prepared.idx
-
-
-def _bytes(state: FilterState) -> dict[str, bytes | object]:
-    return {
-        f.name: (v.tobytes() if isinstance(v, np.ndarray) else v)
-        for f in dataclasses.fields(state)
-        for v in [getattr(state, f.name)]
-    }
+    run = run_in_chunks(kind, problem, 200, specialised=specialised)
+    return run.states, [array for chunk in run.outputs for array in chunk], run.idx
 
 
 @pytest.mark.parametrize(("kind", "dims", "sensor", "limit"), CASES, ids=IDS)
@@ -80,7 +56,7 @@ def test_specialised_kernels_are_bit_identical_to_generic(
     fast_states, fast_out, idx = _run_in_chunks(kind, dims, sensor, limit, specialised=True)
     slow_states, slow_out, _ = _run_in_chunks(kind, dims, sensor, limit, specialised=False)
     for fast, slow in zip(fast_states, slow_states, strict=True):
-        assert _bytes(fast) == _bytes(slow)
+        assert state_bytes(fast) == state_bytes(slow)
     for fast, slow in zip(fast_out, slow_out, strict=True):
         assert fast.dtype == slow.dtype
         assert fast.tobytes() == slow.tobytes()
