@@ -176,14 +176,16 @@ def format_report(report: dict[str, Any]) -> str:
         lines += [
             *_gap(lines),
             "Observers, whole log (samples)           kernel samples/s   fit samples/s    fit s"
-            "   gain design s",
+            "   gain design s   ρ samples/s",
         ]
         for name, rate in report["observers"].items():
             design = f"{rate['design_s']:>16.3f}" if "design_s" in rate else f"{'-':>16}"
+            rho = rate.get("rho_samples_per_s")
+            rho_col = f"{rho:>14.3g}" if rho is not None else f"{'-':>14}"
             label = f"{name} ({rate['samples']:.0f})"
             lines.append(
                 f"  {label:<37} {rate['kernel_samples_per_s']:>17.3g} "
-                f"{rate['fit_samples_per_s']:>15.3g} {rate['fit_s']:>8.3f}{design}"
+                f"{rate['fit_samples_per_s']:>15.3g} {rate['fit_s']:>8.3f}{design}{rho_col}"
             )
     if "simulators" in report:
         lines += [*_gap(lines), "Ground-truth simulators (wall time, compiled)"]

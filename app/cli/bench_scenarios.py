@@ -75,8 +75,11 @@ def observers_on_scenarios(quick: bool) -> dict[str, dict[str, float]]:
     ``kernel_samples_per_s`` is the compiled observer alone from the initial state over the
     whole log (:func:`lpv_run`, :func:`ekf_run`); ``fit_s`` the end-to-end ``fit`` (prepare,
     LMI gain design or initial settling, kernel, snapshot) in seconds; for LPV ``design_s``
-    is the LMI gain synthesis alone (cvxpy + Clarabel, LPV (28)/(35)). Best of 3 after a
-    warm-up; ``quick`` uses the first 300 s.
+    is the LMI gain synthesis (cvxpy + Clarabel, LPV (28)/(35)) with the ρ box it needs, and
+    ``rho_samples_per_s`` the scheduling vector ρ computed from the observer's model
+    (``rho_source="model"``: the Seiliger fixed point per sample,
+    :func:`~estimation.observers.airpath_model.model_rho`) rather than read from the log.
+    Best of 3 after a warm-up; ``quick`` uses the first 300 s.
     """
     from estimation.observers.ekf import ekf_run
     from estimation.observers.lpv import lpv_run
@@ -98,12 +101,15 @@ def observers_on_scenarios(quick: bool) -> dict[str, dict[str, float]]:
         )
 
     fit_rate = best_rate(lambda: lpv.fit(signals), n)
+    model_config = {**scenario.default_config("lpv"), "rho_source": "model"}
+    model_lpv: Any = get_spec("lpv").build(model_config)
     out["lpv on maf-whtc"] = {
         "samples": n,
         "kernel_samples_per_s": best_rate(lpv_kernel, n),
         "fit_samples_per_s": fit_rate,
         "fit_s": n / fit_rate,
         "design_s": best_time(lambda: lpv.design_gain(signals)),
+        "rho_samples_per_s": best_rate(lambda: model_lpv.scheduling(signals), n),
     }
 
     scenario = get_scenario("maf-1d-whtc")

@@ -382,6 +382,42 @@ def turbine_efficiency(bsr: float, c_m: float, eta_max: float, bsr_opt: float) -
 
 
 @nb.njit(cache=True)
+def exhaust_iterate(
+    p_im: float, p_em: float, fuel: float, speed: float, T1: float, xr: float, prm: np.ndarray
+) -> tuple[float, float, float, float, float, float, float]:
+    """The cylinder flows and one Seiliger fixed-point iteration of :func:`airpath_algebra`
+    (its equations there): ``(η_vol, W_ei, W_f, W_eo, T_e, T_1 new, x_r new)`` from the
+    previous iterate ``(T_1, x_r)``. Apart so that :func:`airpath_rho_kernel` iterates only
+    this and evaluates the other sub-models once, at the last iterate."""
+    ga = prm[GAMMA_A]
+    # --- cylinder
+    eta_vol = prm[C_VOL1] * math.sqrt(p_im) + prm[C_VOL2] * math.sqrt(speed) + prm[C_VOL3]
+    w_ei = eta_vol * p_im * speed * prm[V_D] / (120.0 * prm[R_A] * prm[T_IM])
+    w_f = 1e-6 / 120.0 * prm[N_CYL] * speed * fuel
+    w_eo = w_ei + w_f
+    # --- exhaust temperature (one fixed-point iteration in (T_1, x_r))
+    rc = prm[R_COMP]
+    rc_g = rc ** (ga - 1.0)
+    pi_e = p_em / p_im
+    q_in = w_f * prm[Q_HV] * (1.0 - xr) / w_eo if w_eo > 1e-9 else 0.0
+    x_cv = prm[X_CV]
+    x_p = 1.0 + q_in * x_cv / (prm[C_VA] * T1 * rc_g)
+    x_v = 1.0 + q_in * (1.0 - x_cv) / (prm[C_PA] * (q_in * x_cv / prm[C_VA] + T1 * rc_g))
+    pi_e_g = pi_e ** (1.0 / ga)  # Π_e^(1/γa); Π_e^(1−1/γa) = Π_e / Π_e^(1/γa)
+    x_p_g = x_p ** (-1.0 / ga)  # x_p^(−1/γa); x_p^(1/γa−1) = 1 / (x_p · x_p^(−1/γa))
+    xr_new = pi_e_g * x_p_g / (rc * x_v)
+    t_e = (
+        prm[ETA_SC]
+        * (pi_e / pi_e_g)
+        / rc_g
+        / (x_p * x_p_g)
+        * (q_in * ((1.0 - x_cv) / prm[C_PA] + x_cv / prm[C_VA]) + T1 * rc_g)
+    )
+    t1_new = xr_new * t_e + (1.0 - xr_new) * prm[T_IM]
+    return eta_vol, w_ei, w_f, w_eo, t_e, t1_new, xr_new
+
+
+@nb.njit(cache=True)
 def airpath_algebra(
     p_im: float,
     p_em: float,
@@ -439,30 +475,9 @@ def airpath_algebra(
     """
     ga = prm[GAMMA_A]
     ge = prm[GAMMA_E]
-    # --- cylinder
-    eta_vol = prm[C_VOL1] * math.sqrt(p_im) + prm[C_VOL2] * math.sqrt(speed) + prm[C_VOL3]
-    w_ei = eta_vol * p_im * speed * prm[V_D] / (120.0 * prm[R_A] * prm[T_IM])
-    w_f = 1e-6 / 120.0 * prm[N_CYL] * speed * fuel
-    w_eo = w_ei + w_f
-    # --- exhaust temperature (one fixed-point iteration in (T_1, x_r))
-    rc = prm[R_COMP]
-    rc_g = rc ** (ga - 1.0)
-    pi_e = p_em / p_im
-    q_in = w_f * prm[Q_HV] * (1.0 - xr) / w_eo if w_eo > 1e-9 else 0.0
-    x_cv = prm[X_CV]
-    x_p = 1.0 + q_in * x_cv / (prm[C_VA] * T1 * rc_g)
-    x_v = 1.0 + q_in * (1.0 - x_cv) / (prm[C_PA] * (q_in * x_cv / prm[C_VA] + T1 * rc_g))
-    pi_e_g = pi_e ** (1.0 / ga)  # Π_e^(1/γa); Π_e^(1−1/γa) = Π_e / Π_e^(1/γa)
-    x_p_g = x_p ** (-1.0 / ga)  # x_p^(−1/γa); x_p^(1/γa−1) = 1 / (x_p · x_p^(−1/γa))
-    xr_new = pi_e_g * x_p_g / (rc * x_v)
-    t_e = (
-        prm[ETA_SC]
-        * (pi_e / pi_e_g)
-        / rc_g
-        / (x_p * x_p_g)
-        * (q_in * ((1.0 - x_cv) / prm[C_PA] + x_cv / prm[C_VA]) + T1 * rc_g)
+    eta_vol, w_ei, w_f, w_eo, t_e, t1_new, xr_new = exhaust_iterate(
+        p_im, p_em, fuel, speed, T1, xr, prm
     )
-    t1_new = xr_new * t_e + (1.0 - xr_new) * prm[T_IM]
     t_amb = prm[T_AMB]
     if w_eo > 1e-9:
         t_em = t_amb + (t_e - t_amb) * math.exp(-prm[HA_PIPE] / (w_eo * prm[C_PE]))
@@ -875,20 +890,22 @@ def airpath_rho_kernel(
     """ρ (LPV (3)), ``T_em`` and ``W_egr`` from (measured) signals, sample by sample.
 
     The Seiliger fixed point ``(T_1, x_r)`` is iterated ``n_iter`` times per sample starting
-    from ``(T_im, 0)`` (it contracts by about ``x_r`` ≈ 0.05 per iteration).
+    from ``(T_im, 0)`` (it contracts by about ``x_r`` ≈ 0.05 per iteration); the iterations
+    before the last run :func:`exhaust_iterate` alone, the last the whole algebra, which
+    gives the bits of running the whole algebra every time.
     """
     alg = np.empty(N_ALG)
     rho = np.empty(5)
     for k in range(p_im.shape[0]):
         t1 = prm[T_IM]
         xr = 0.0
-        for _ in range(n_iter):
-            airpath_algebra(
-                p_im[k], p_em[k], omega_t[k], u_egr_pos[k], u_vgt_pos[k], fuel[k], speed[k],
-                t1, xr, prm, alg,
-            )  # fmt: skip
-            t1 = alg[A_T1_NEW]
-            xr = alg[A_XR_NEW]
+        for _ in range(n_iter - 1):
+            iterate = exhaust_iterate(p_im[k], p_em[k], fuel[k], speed[k], t1, xr, prm)
+            t1, xr = iterate[5], iterate[6]
+        airpath_algebra(
+            p_im[k], p_em[k], omega_t[k], u_egr_pos[k], u_vgt_pos[k], fuel[k], speed[k],
+            t1, xr, prm, alg,
+        )  # fmt: skip
         rho_from_algebra(p_im[k], p_em[k], omega_t[k], prm, alg, rho)
         for r in range(5):
             rho_out[k, r] = rho[r]

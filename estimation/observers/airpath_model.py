@@ -196,6 +196,8 @@ def model_rho(
         raise ShapeError(f"time_s must be strictly increasing with {n} samples, got {t.shape}")
     if n < 2:
         raise ConfigError("ρ from measurements needs at least two samples")
+    if n_iter < 1:
+        raise ConfigError(f"n_iter must be at least 1, got {n_iter}")
     rho = np.empty((n, 5))
     t_em = np.empty(n)
     w_egr = np.empty(n)

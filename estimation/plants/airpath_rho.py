@@ -116,6 +116,8 @@ def rho_from_measurements(
     w_egr = np.empty(n)
     if rho1_model == "manifold" and time_s is None:
         raise ConfigError("time_s is needed for the manifold ρ1 (or pass rho1_model='compressor')")
+    if n_iter < 1:
+        raise ConfigError(f"n_iter must be at least 1, got {n_iter}")
     apk.airpath_rho_kernel(*cols, int(n_iter), prm, rho, t_em, w_egr)
     if rho1_model == "manifold":
         a1 = prm[apk.R_A] * prm[apk.T_IM] / prm[apk.V_IM]

@@ -166,6 +166,33 @@ def test_rho_from_measurements_matches_truth_without_noise() -> None:
         rho_from_measurements(*measured, time_s=sig.time, rho1_model="map")  # type: ignore[arg-type]
 
 
+@pytest.mark.parametrize("n_iter", [1, 2, 12])
+def test_rho_kernel_gives_the_bits_of_the_whole_algebra_iterated(n_iter: int) -> None:
+    """The kernel iterates only the Seiliger part (``exhaust_iterate``) before its last
+    iteration; the same as evaluating every sub-model each time, as a plain loop does here."""
+    t, fuel, speed = random_steps(40.0, seed=5)
+    sig, tr = simulate_airpath(t, fuel, speed, seed=1)  # measured: noisy sensors
+    names = ("p_im_pa", "p_em_pa", "omega_t_rad_s", "u_egr_pos_pct", "u_vgt_pos_pct",
+             "fuel_mg_per_cycle", "speed_rpm")  # fmt: skip
+    cols = [np.ascontiguousarray(sig[name][::7]) for name in names]
+    prm = tr.params.to_vector()
+    n = cols[0].size
+    rho, t_em, w_egr = np.empty((n, 5)), np.empty(n), np.empty(n)
+    apk.airpath_rho_kernel(*cols, n_iter, prm, rho, t_em, w_egr)
+    alg, expected = np.empty(apk.N_ALG), np.empty((n, 5))
+    for k in range(n):
+        t1, xr = prm[apk.T_IM], 0.0
+        for _ in range(n_iter):
+            apk.airpath_algebra(*(c[k] for c in cols), t1, xr, prm, alg)
+            t1, xr = alg[apk.A_T1_NEW], alg[apk.A_XR_NEW]
+        apk.rho_from_algebra(cols[0][k], cols[1][k], cols[2][k], prm, alg, expected[k])
+        assert t_em[k] == alg[apk.A_T_EM]
+        assert w_egr[k] == alg[apk.A_W_EGR]
+    assert rho.tobytes() == expected.tobytes()
+    with pytest.raises(ConfigError, match="n_iter"):
+        rho_from_measurements(*cols, time_s=np.arange(n) * 0.7, params=tr.params, n_iter=0)
+
+
 def test_manifold_rho1_is_well_conditioned_where_the_compressor_map_is_not() -> None:
     """Under pressure noise the compressor-map ρ1 (LPV (3) literally) is biased by more than
     the MAF error to be found; the intake-manifold balance is not (see rho_from_measurements)."""
