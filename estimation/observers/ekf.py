@@ -50,8 +50,7 @@ Example
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
 from pydantic import BaseModel
@@ -66,9 +65,9 @@ from estimation.observers.ekf_config import (
     EkfDefConfig,
     EkfMapConfig,
 )
+from estimation.observers.ekf_state import EkfModel, EkfSettings, EkfState
 from estimation.registry import Cost, EstimatorKind, family
 from estimation.signals import Signals
-from estimation.state import EstimatorState
 from estimation.table import Axis, Table
 
 __all__ = [
@@ -91,50 +90,6 @@ def _mode_code(kind: str) -> int:
     """The kernel's code of an EKF variant named in :data:`VARIANTS`."""
     k = kernels.ekf
     return {"ekf-def": k.MODE_DEF, "ekf-aug": k.MODE_AUG, "ekf-map": k.MODE_MAP}[kind]
-
-
-@dataclass(frozen=True, slots=True, eq=False)
-class EkfState(EstimatorState):
-    """Frozen, serialisable EKF state after ``step`` log samples.
-
-    ``x`` (m,) = ``[p_im, p_em, ω_t]`` + ``[b]`` (Aug) or + ``θ`` (Map) and ``P`` (m, m) are
-    the posterior of sample ``step − 1`` (the prior of sample 0 when ``step = 0``); ``mem``
-    the model's Seiliger memory ``(T_1 K, x_r)``; ``counts`` (kernel ``C_*`` layout) the
-    gated outputs per output and the state clamps; ``rejected_mask``/``rejected_gate`` the
-    samples masked / with a gated output.
-    """
-
-    rejected_mask: int
-    rejected_gate: int
-    counts: np.ndarray
-    x: np.ndarray
-    P: np.ndarray
-    mem: np.ndarray
-
-    ARRAYS: ClassVar[tuple[str, ...]] = ("counts", "x", "P", "mem")
-
-
-@dataclass(frozen=True, slots=True, eq=False)
-class EkfModel:
-    """A log, or rows ``offset …`` of one, turned into kernel inputs (chunks index into it).
-
-    ``U`` (n, 4) inputs in ``U_*`` order; ``Y`` (n, 4) measurements in ``Y_*`` order (NaN
-    for outputs not used); ``accept`` (n,); ``time_s`` (n,). A window of a log of ``total``
-    samples (:meth:`EkfObserver.prepare_window`) starts at log sample ``offset``, the row
-    before its first step (the kernel propagates from sample ``k − 1``).
-    """
-
-    U: np.ndarray
-    Y: np.ndarray
-    accept: np.ndarray
-    time_s: np.ndarray
-    offset: int = 0
-    total: int = 0
-
-    @property
-    def end(self) -> int:
-        """The log sample after the model's last row."""
-        return self.offset + int(self.U.shape[0])
 
 
 def prepare_model(
@@ -177,24 +132,6 @@ def prepare_model(
         offset=offset,
         total=n if total is None else total,
     )
-
-
-@dataclass(frozen=True, slots=True)
-class EkfSettings:
-    """Resolved numeric settings of one variant (kernel arguments)."""
-
-    mode: int
-    g: np.ndarray
-    use: np.ndarray
-    r_abs2: np.ndarray
-    r_rel2: np.ndarray
-    q_rate: np.ndarray
-    p0_diag: np.ndarray
-    limit: int  # kernels.ekf.LIMIT_NONE / LIMIT_PSD / LIMIT_DIAG
-    gate2: float
-    max_step_s: float
-    theta0: float
-    prm: np.ndarray
 
 
 def _limit_code(limit: str) -> int:
