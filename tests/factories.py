@@ -17,6 +17,8 @@ from typing import Any
 
 import numpy as np
 
+from estimation.filters.functions import run_chunk
+from estimation.filters.state import FilterState
 from estimation.registry import EstimatorKind, get_spec, names
 from estimation.signals import Signals
 
@@ -220,7 +222,7 @@ class ChunkedRun:
     """A map filter run over a :class:`Problem` in chunks: the state after each chunk, each
     chunk's predictions, statuses and innovation variances, and the regressor's cells."""
 
-    states: list[Any]
+    states: list[FilterState]
     outputs: list[tuple[np.ndarray, np.ndarray, np.ndarray]]
     idx: np.ndarray
 
@@ -230,8 +232,6 @@ def run_in_chunks(
 ) -> ChunkedRun:
     """Filter ``kind`` over ``problem``, one :func:`run_chunk` call per ``chunk`` samples,
     carrying the state between the calls."""
-    from estimation.filters.functions import run_chunk
-
     estimator = get_spec(kind).build(problem.config(kind))
     prepared = estimator.prepare(problem.signals(), problem.accept)
     state = estimator.initial_state(prepared)
@@ -256,7 +256,7 @@ def run_in_chunks(
     return run
 
 
-def state_bytes(state: Any) -> dict[str, bytes | object]:
+def state_bytes(state: FilterState) -> dict[str, bytes | object]:
     """A filter state's fields, arrays as their bytes: equal only if bit-identical."""
     return {
         f.name: (v.tobytes() if isinstance(v, np.ndarray) else v)
