@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 import pytest
-from scipy.stats import norm
+from scipy.stats import chi2, norm
 
 from estimation.errors import ConfigError
 from estimation.innovation import (
@@ -128,6 +128,16 @@ def test_chi2_band_and_log_likelihood_match_their_definitions() -> None:
     empty = innovation_stats(np.empty(0), np.empty(0))
     assert empty.samples == 0
     assert math.isnan(empty.mean_nis)
+
+
+@pytest.mark.parametrize("dof", [1, 2, 3, 7.5, 40, 1_000, 262_144])
+def test_chi2_band_is_scipy_stats_quantiles(dof: float) -> None:
+    """The band comes from ``scipy.special`` (cheaper to import): the same quantiles as
+    ``scipy.stats.chi2.ppf``, up to a large log's sample count."""
+    lo, hi = chi2_band(dof, 0.9)
+    assert lo == pytest.approx(chi2.ppf(0.05, dof), rel=1e-12, abs=1e-300)
+    assert hi == pytest.approx(chi2.ppf(0.95, dof), rel=1e-12)
+    assert lo < dof < hi
 
 
 def test_only_map_filters_have_innovations() -> None:
