@@ -176,10 +176,14 @@ def format_report(report: dict[str, Any]) -> str:
         lines += [
             *_gap(lines),
             "Observers, whole log (samples)           kernel samples/s   fit samples/s    fit s"
-            "   gain design s   ρ samples/s",
+            "   gain design s (first)   ρ samples/s",
         ]
         for name, rate in report["observers"].items():
-            design = f"{rate['design_s']:>16.3f}" if "design_s" in rate else f"{'-':>16}"
+            design = (
+                f"{rate['design_s']:>16.3f} ({rate['first_design_s']:.3f})"
+                if "design_s" in rate
+                else f"{'-':>24}"
+            )
             rho = rate.get("rho_samples_per_s")
             rho_col = f"{rho:>14.3g}" if rho is not None else f"{'-':>14}"
             label = f"{name} ({rate['samples']:.0f})"

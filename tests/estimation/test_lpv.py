@@ -2,6 +2,7 @@
 map accuracy of LPV §4 on our MAF scenarios."""
 
 import dataclasses
+from concurrent.futures import ThreadPoolExecutor
 from functools import cache
 
 import numpy as np
@@ -10,7 +11,12 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 from estimation.errors import ConfigError, SignalError
 from estimation.metrics import map_metrics
-from estimation.observers.lmi import box_vertices, synthesize_gain, system_matrices
+from estimation.observers.lmi import (
+    box_vertices,
+    forget_compiled_lmis,
+    synthesize_gain,
+    system_matrices,
+)
 from estimation.observers.lpv import LPV_SPECS, LpvObserver, LpvState, lpv_run
 from estimation.observers.lpv_config import LpvConfig
 from estimation.observers.lpv_fill import fill_quadratic, fill_smooth, visited_cells
@@ -53,11 +59,34 @@ def test_feasible_box_gives_hurwitz_closed_loop_at_every_vertex(structure):
         assert g.L[2, 0] != 0.0
 
 
+def test_a_design_on_the_compiled_problem_equals_a_freshly_compiled_one():
+    """The vertex LMIs are compiled once per process and structure and refilled for each
+    box: a design must not depend on the boxes designed before it, nor on threads designing
+    at the same time."""
+    boxes = [(RHO_LO, RHO_HI), (RHO_LO * 1.3, RHO_HI * 0.9), (RHO_LO * 0.7, RHO_HI * 1.2)]
+    fresh = []
+    for lo, hi in boxes:
+        forget_compiled_lmis()
+        fresh.append(synthesize_gain(lo, hi, A1, A2, eps1=0.2, max_P=5e3))
+    for (lo, hi), first in zip(reversed(boxes), reversed(fresh), strict=True):
+        again = synthesize_gain(lo, hi, A1, A2, eps1=0.2, max_P=5e3)
+        assert_array_equal(again.L, first.L)
+        assert_array_equal(again.margins, first.margins)
+    with ThreadPoolExecutor(3) as pool:
+        designs = list(pool.map(lambda box: synthesize_gain(*box, A1, A2, eps1=0.2, max_P=5e3),
+                                boxes * 2))  # fmt: skip
+    for design, first in zip(designs, fresh * 2, strict=True):
+        assert_array_equal(design.L, first.L)
+    assert not np.allclose(fresh[0].L, fresh[1].L)  # the boxes' designs differ
+
+
 def test_bad_eps_and_infeasible_box_error():
     with pytest.raises(ConfigError, match="eps1 \\+ eps2 must be < 2"):
         synthesize_gain(RHO_LO, RHO_HI, A1, A2, eps1=1.5, eps2=0.6)
     with pytest.raises(ConfigError, match="eps1 and eps2 must be > 0"):
         synthesize_gain(RHO_LO, RHO_HI, A1, A2, eps1=0.0)
+    with pytest.raises(ConfigError, match="max_P must be finite and > 0"):
+        synthesize_gain(RHO_LO, RHO_HI, A1, A2, max_P=0.0)
     lo = RHO_LO.copy()
     lo[3] = 0.0  # ρ2 = ρ4 = 0: p_em unobservable and marginal
     for structure in ("decoupled", "full"):
