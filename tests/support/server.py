@@ -12,6 +12,7 @@ import os
 import random
 import signal
 import socket
+import ssl
 import subprocess
 import sys
 import tempfile
@@ -30,6 +31,11 @@ FINISHED = ("succeeded", "failed", "cancelled", "interrupted")
 PORT_ATTEMPTS = 5
 DATASET_CHILD = "mw-datasets"  # app.services.dataset_child.PROCESS_NAME (this imports no app)
 WORKER_NAMES = ("mw-idle", "mw-run-")  # what a run worker calls itself (app/runs/pool.py)
+
+
+# The servers speak plain HTTP, but every httpx.Client builds a TLS context and loads the CA
+# bundle (about 20 ms of CPU) unless it is given one: the suite's clients share this one.
+TLS = ssl.create_default_context()
 
 
 class PortTakenError(RuntimeError):
@@ -148,7 +154,7 @@ class Server:
             [*self.args, "--port", str(self.port)], cwd=ROOT, env=self.env, stdout=self.log,
             stderr=subprocess.STDOUT, start_new_session=True,
         )  # fmt: skip
-        self.http = httpx.Client(base_url=self.base, timeout=30)
+        self.http = httpx.Client(base_url=self.base, timeout=30, verify=TLS)
 
     @property
     def url(self) -> str:
@@ -156,7 +162,7 @@ class Server:
 
     def api(self, timeout: float = 60.0) -> httpx.Client:
         """A new client of the server (the caller closes it), for another thread, say."""
-        return httpx.Client(base_url=self.base, timeout=timeout)
+        return httpx.Client(base_url=self.base, timeout=timeout, verify=TLS)
 
     def _wait_ready(self, timeout: float = 90.0) -> None:
         """Until ``/api/health`` answers from this server's own socket; raises
