@@ -183,16 +183,16 @@ def synthesize_gain(
             raise ConfigError(f"LPV gain LMI: solver failed ({exc})") from exc
         status = str(lmi.problem.status)
         t = lmi.t.value
-        P, Q, Y = (None if v.value is None else np.array(v.value) for v in (lmi.P, lmi.Q, lmi.Y))
+        # copies, read under the lock: the next design overwrites the variables' values
+        P, Q, Y = (np.array(v.value, dtype=np.float64) for v in (lmi.P, lmi.Q, lmi.Y))
     if status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE) or t is None:
         raise ConfigError(
             f"LPV gain LMI is infeasible on the ρ-box (solver status {status!r}); "
             f"rho_min={lo.tolist()}, rho_max={hi.tolist()}"
         )
-    Pv = np.asarray(P)
-    Pv = 0.5 * (Pv + Pv.T)
-    Qv = 0.5 * (np.asarray(Q) + np.asarray(Q).T)
-    Yv = np.array(Y, dtype=np.float64)
+    Pv = 0.5 * (P + P.T)
+    Qv = 0.5 * (Q + Q.T)
+    Yv = Y
     if structure == "decoupled":  # exact zeros, not the solver's ~1e−12
         Pv[0, 2] = Pv[2, 0] = Pv[1, 2] = Pv[2, 1] = 0.0
         Yv[2, 0] = Yv[2, 2] = 0.0
