@@ -27,6 +27,7 @@ from estimation.plants.torque_params import (
     load_cell_noise_std_nm,
     shaft_ripple_rel,
 )
+from estimation.scenarios.catalog import scenarios
 from estimation.torque.config import DEFAULT_J_NM_S_PER_RPM
 
 NOISE_STD = math.sqrt(20.0)  # TQ §VI N(0, 20) read as variance 20
@@ -417,3 +418,12 @@ def test_rig_config_errors():
                 DieselRigParams(), demand_times_s=(0.0, 1.0, 1.0), demand_torques_nm=(0.0, 1.0, 2.0)
             ),
         )
+
+
+def test_the_rig_scenarios_description_states_its_plants_noise() -> None:
+    """``GET /api/scenarios`` serves this text: it must say what the plant simulates."""
+    text = scenarios()["torque-rig"].description
+    params = DieselRigParams()
+    assert f"σ = {params.speed_noise_std_rpm:.1f} rpm" in text
+    assert f"σ = {params.load_noise_std_nm:.1f} N·m" in text
+    assert "1000–2500 rpm" in text
