@@ -421,9 +421,12 @@ def test_rig_config_errors():
 
 
 def test_the_rig_scenarios_description_states_its_plants_noise() -> None:
-    """``GET /api/scenarios`` serves this text: it must say what the plant simulates."""
+    """``GET /api/scenarios`` serves this text, written out (the API process imports no
+    plant): it must say what the plant simulates."""
     text = scenarios()["torque-rig"].description
-    params = DieselRigParams()
-    assert f"σ = {params.speed_noise_std_rpm:.1f} rpm" in text
-    assert f"σ = {params.load_noise_std_nm:.1f} N·m" in text
-    assert "1000–2500 rpm" in text
+    p = DieselRigParams()
+    low, high = p.sweep_speed_range_rpm
+    assert f"σ = {p.speed_noise_std_rpm:.1f} rpm" in text
+    assert f"σ = {p.load_noise_std_nm:.1f} N·m" in text
+    assert f"{low:.0f}–{high:.0f} rpm" in text
+    assert f"{min(p.demand_torques_nm):.0f}–{max(p.demand_torques_nm):.0f} N·m" in text
