@@ -41,6 +41,7 @@ from app.io.csv_sniff import (
     sniff_decimal,
     sniff_delimiter,
     split_header,
+    time_scale,
 )
 from estimation import Signals
 from estimation.errors import SignalError
@@ -103,8 +104,9 @@ def read_csv(
 ) -> CsvLog:
     """Load ``columns`` (default: every numeric column) of a CSV log.
 
-    The time base is ``time_column`` (seconds), else the first of :data:`TIME_COLUMNS`
-    present, else the sample index (unit ``sample``, 1 Hz nominal).
+    The time base is ``time_column`` (in its unit, s, ms, µs, ns, min or h, turned into
+    seconds), else the first of :data:`TIME_COLUMNS` present, else the sample index (unit
+    ``sample``, 1 Hz nominal).
     """
     path = Path(path)
     try:
@@ -237,6 +239,8 @@ class CsvHeader:
     must: dict[str, bool]
     allowed_empty: frozenset[str]
     body_start: int
+    time_scale: float = 1.0
+    """Seconds per unit of the time column (1 for ``time [s]``, 1e-3 for ``time [ms]``)."""
 
 
 def read_header(
@@ -323,8 +327,17 @@ def read_header(
         if name == time_column or wanted is None or name in wanted
     }
     allowed_empty = {n for n in must if n != time_column} if empty_is_missing else set()
+    scale = 1.0 if time_column is None else time_scale(time_column, unit_of[time_column])
     return CsvHeader(
-        names, unit_of, delimiter, decimal, time_column, must, frozenset(allowed_empty), body_start
+        names,
+        unit_of,
+        delimiter,
+        decimal,
+        time_column,
+        must,
+        frozenset(allowed_empty),
+        body_start,
+        scale,
     )
 
 
@@ -355,6 +368,8 @@ def _read_body(text: str | bytes, header: CsvHeader) -> _Table:
     values = body.values
     time_column = header.time_column
     stamps = values.pop(time_column) if time_column is not None else None
+    if stamps is not None and header.time_scale != 1.0:
+        stamps = stamps * header.time_scale
     time = stamps if stamps is not None else np.arange(body.rows, dtype=np.float64)
     return _Table(
         time,

@@ -20,6 +20,13 @@ from estimation.errors import SignalError
 
 TIME_COLUMNS = ("time", "time_s", "t", "timestamp", "timestamps")  # the last: asammdf's exports
 DELIMITERS = ",;\t"
+# The units a time column may be in, and their length in seconds (any case but µs/us/ns/ms
+# as written; "" is seconds, what a header without a unit means).
+TIME_UNITS_S = {
+    "": 1.0, "s": 1.0, "sec": 1.0, "secs": 1.0, "second": 1.0, "seconds": 1.0,
+    "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "μs": 1e-6, "ns": 1e-9,
+    "min": 60.0, "h": 3600.0,
+}  # fmt: skip
 _HEADER_UNIT = re.compile(r"^\s*(?P<name>.+?)\s*\[(?P<unit>[^\]]*)\]\s*$")
 DECIMAL_COMMA = re.compile(r"^\s*[+-]?\d+,\d+([eE][+-]?\d+)?\s*$")
 _DECIMAL_POINT = re.compile(r"\d\.\d")
@@ -191,3 +198,18 @@ def is_units_row(cells: list[str]) -> bool:
 
 def _is_number(text: str) -> bool:
     return NUMBER.fullmatch(text) is not None or DECIMAL_COMMA.match(text) is not None
+
+
+def time_scale(column: str, unit: str) -> float:
+    """Seconds per unit of the time ``column`` written in ``unit`` (:data:`TIME_UNITS_S`);
+    a unit that is not a time is refused, naming the column, since reading its numbers as
+    seconds would store a log of the wrong length."""
+    written = unit.strip()
+    scale = TIME_UNITS_S.get(written, TIME_UNITS_S.get(written.lower()))
+    if scale is None:
+        known = ", ".join(u for u in TIME_UNITS_S if u)
+        raise LogFormatError(
+            f"time column {column!r} is in {written!r}, not a unit of time ({known})",
+            field=column,
+        )
+    return scale

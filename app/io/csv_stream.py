@@ -299,6 +299,8 @@ def _stream_body(
                 time = np.arange(rows, rows + count, dtype=np.float64) / rate_hz
             else:
                 time = _joined(values[column])
+                if header.time_scale != 1.0:
+                    time = time * header.time_scale
             steps.add(time)
             writer.write(time, [_joined(values[n]) for n in kept])
         if not data:

@@ -133,6 +133,7 @@ CASES: dict[str, Callable[[], bytes]] = {
         _rows(), "time;n;q;z", sep=";", decimal=",", units_row="s;rpm;mg;-"
     ).encode(),
     "tab": lambda: _text(_rows(), "time\tn [rpm]\tq [mg]\tz", sep="\t").encode(),
+    "time in ms": lambda: _text(_rows() * [1e3, 1, 1, 1], "time [ms],n,q,z").encode(),
     "utf-8 header with a BOM": lambda: (
         b"\xef\xbb\xbf" + _text(_rows(), "time [s],T [°C],q [mg],z").encode()
     ),

@@ -51,6 +51,28 @@ def test_units_sidecar_overrides_and_unknown_name_is_an_error() -> None:
     assert info.value.field == "units.speed"
 
 
+@pytest.mark.parametrize(
+    ("written", "scale"),
+    [("ms", 1e-3), ("us", 1e-6), ("µs", 1e-6), ("ns", 1e-9), ("sec", 1.0), ("min", 60.0)],
+)
+def test_a_time_column_in_another_unit_is_read_as_seconds(written: str, scale: float) -> None:
+    ticks = np.arange(50) * 10  # 10 units a row
+    body = "".join(f"{t},{k}\n" for k, t in enumerate(ticks))
+    in_header = ingest(f"time [{written}],x\n{body}".encode())
+    in_units_row = ingest(f"time,x\n{written},-\n{body}".encode())
+    in_form = ingest(f"time,x\n{body}".encode(), units={"time": written})
+    for ds in (in_header, in_units_row, in_form):
+        np.testing.assert_allclose(ds.signals.time, ticks * scale, rtol=1e-15)
+        assert ds.duration_s == pytest.approx(490 * scale)
+        assert ds.rate_hz == pytest.approx(1 / (10 * scale))
+
+
+def test_a_time_column_in_a_unit_that_is_not_time_is_refused() -> None:
+    with pytest.raises(InputError, match="'timestamp' is in 'rpm', not a unit of time") as info:
+        ingest(b"timestamp [rpm],x\n0,1\n1,2\n")
+    assert info.value.field == "timestamp"
+
+
 def test_file_object_and_explicit_time_column() -> None:
     ds = ingest(io.BytesIO(b"stamp,x\n0,1\n2,3\n"), time_column="stamp")
     assert ds.time_column == "stamp"
