@@ -75,6 +75,12 @@ class Settings(BaseSettings):
         description="Largest upload read whole into memory, in MiB: an MCAP, MDF or "
         "non-dense CSV log, an A2L or a values file (never more than max_upload_mb).",
     )
+    max_json_mb: float = Field(
+        16.0,
+        gt=0,
+        description="Largest JSON request body, in MiB (a 250,000-cell map fits in about 6); "
+        "it is parsed whole in the API process.",
+    )
     max_decompressed_mb: float = Field(
         512.0,
         gt=0,
@@ -291,6 +297,10 @@ class Settings(BaseSettings):
     @property
     def max_whole_bytes(self) -> int:
         return int(min(self.max_whole_mb, self.max_upload_mb) * 1024 * 1024)
+
+    @property
+    def max_json_bytes(self) -> int:
+        return int(self.max_json_mb * 1024 * 1024)
 
     @property
     def max_decompressed_bytes(self) -> int:

@@ -162,7 +162,7 @@ def create_app(settings: Settings | None = None, *, execute_runs: bool = True) -
             allow_methods=["GET", "POST", "PUT", "PATCH", "DELETE"],
             allow_headers=["Authorization", "Content-Type"],
         )
-    app.add_middleware(StrictJson)
+    app.add_middleware(StrictJson, max_bytes=settings.max_json_bytes)
     app.add_middleware(BodyLimit, max_bytes=settings.max_upload_bytes + MULTIPART_OVERHEAD)
     app.add_middleware(TrustedHosts, allowed_hosts=settings.trusted_hosts, www_redirect=False)
     app.add_middleware(SecurityHeaders)
@@ -172,27 +172,49 @@ def create_app(settings: Settings | None = None, *, execute_runs: bool = True) -
 class StrictJson:
     """JSON request bodies are strict JSON: ``NaN``, ``Infinity`` and ``-Infinity`` (which
     Python's json module accepts by default) are refused with 422 before any handler sees
-    them, so no non-finite number can enter a config, a gate or a map."""
+    them, so no non-finite number can enter a config, a gate or a map. A JSON body is parsed
+    whole in this process, so one over ``max_bytes`` is refused with 413 as it streams in
+    (``MAPWISE_MAX_JSON_MB``), and one nested too deeply to parse with 422."""
 
-    def __init__(self, app: ASGIApp) -> None:
+    def __init__(self, app: ASGIApp, *, max_bytes: int) -> None:
         self.app = app
+        self.max_bytes = max_bytes
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         headers = dict(scope.get("headers", [])) if scope["type"] == "http" else {}
         if b"json" not in headers.get(b"content-type", b""):
             await self.app(scope, receive, send)
             return
+        too_large = PayloadTooLargeError(
+            f"the JSON body exceeds the limit of {self.max_bytes} bytes (MAPWISE_MAX_JSON_MB)",
+            field="body",
+        )
+        length = headers.get(b"content-length")
+        if length is not None and length.isdigit() and int(length) > self.max_bytes:
+            await _send_error(send, too_large)
+            return
         chunks: list[bytes] = []
+        received = 0
         while True:
             message = await receive()
             if message["type"] != "http.request":
                 await self.app(scope, receive, send)  # a disconnect: nothing to check
                 return
             chunks.append(message.get("body", b""))
+            received += len(chunks[-1])
+            if received > self.max_bytes:
+                await _send_error(send, too_large)
+                return
             if not message.get("more_body", False):
                 break
         body = b"".join(chunks)
-        token = _non_finite_token(body)
+        try:
+            token = _non_finite_token(body)
+        except RecursionError:
+            await _send_error(
+                send, InvalidRequestError("the JSON body is nested too deeply", field="body")
+            )
+            return
         if token is not None:
             error = InvalidRequestError(
                 f"the body holds {token}, which is not a JSON number; numbers must be finite"

@@ -71,6 +71,8 @@ def map_from_json(data: bytes | str | Mapping[str, Any]) -> Table:
                 field="file",
                 line=exc.lineno,
             ) from None
+        except RecursionError:
+            raise InputError("the JSON document is nested too deeply", field="file") from None
     if not isinstance(document, Mapping):
         raise InputError("a map document is a JSON object with 'axes' and 'values'", field="file")
     axes_doc = document.get("axes")

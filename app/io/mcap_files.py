@@ -170,11 +170,13 @@ def _usable_topic(
         return None
     try:
         document = json.loads(schema.data)
+        properties = list(_numeric_properties(document, ()))
+    except RecursionError:
+        raise InputError(f"topic {topic}: the schema is nested too deeply", field=topic) from None
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise InputError(
             f"topic {topic}: the schema is not valid JSON ({exc})", field=topic
         ) from None
-    properties = list(_numeric_properties(document, ()))
     names = [p[0] for p, _ in properties if len(p) == 1]
     wanted = [time_column] if time_column else list(TIME_PROPERTIES)
     time_property = next((n for n in wanted if n in names), None)
@@ -216,6 +218,10 @@ def _decode_topic(
     for k, (_, raw) in enumerate(messages):
         try:
             message = json.loads(raw)
+        except RecursionError:
+            raise InputError(
+                f"topic {topic.topic}: message {k} is nested too deeply", field=topic.topic
+            ) from None
         except (json.JSONDecodeError, UnicodeDecodeError) as exc:
             raise InputError(
                 f"topic {topic.topic}: message {k} is not valid JSON ({exc})", field=topic.topic

@@ -45,6 +45,8 @@ def _units(raw: str | None) -> dict[str, str] | None:
         units = json.loads(raw)
     except json.JSONDecodeError as exc:
         raise InvalidRequestError(f"units must be a JSON object: {exc.msg}", field="units") from exc
+    except RecursionError:
+        raise InvalidRequestError("units is nested too deeply", field="units") from None
     if not isinstance(units, dict) or not all(
         isinstance(k, str) and isinstance(v, str) for k, v in units.items()
     ):
@@ -66,6 +68,8 @@ def _channels(raw: str | None) -> list[str] | None:
                 f"channels must be a comma-separated list or a JSON array: {exc.msg}",
                 field="channels",
             ) from exc
+        except RecursionError:
+            raise InvalidRequestError("channels is nested too deeply", field="channels") from None
         if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
             raise InvalidRequestError(
                 'channels must be a JSON array of strings, e.g. ["rpm", "load"]',

@@ -197,6 +197,9 @@ SCHEMA = number_schema("time_s", "rpm")
 CHUNK = 0x06
 
 
+DEEP = b"[" * 100_000 + b"]" * 100_000  # deeper than json.loads recurses
+
+
 def bad_mcaps() -> list:
     good = write_mcap({"/e": (SCHEMA, msgs(GOOD))})
     bomb_rows = [{"time_s": 0.0, "rpm": 1.0, "pad": "0" * 4_000_000}, {"time_s": 1.0, "rpm": 2.0}]
@@ -312,6 +315,20 @@ def bad_mcaps() -> list:
             "too few samples",
         ),
         ("no channels", write_mcap({}), "unsupported_format", "file", "no usable channel"),
+        (
+            "message nested too deeply",
+            write_mcap({"/e": (SCHEMA, [(0, b'{"time_s": 0, "x": ' + DEEP + b"}")])}),
+            "validation_error",
+            "/e",
+            "message 0 is nested too deeply",
+        ),
+        (
+            "schema nested too deeply",
+            write_mcap({"/e": ('{"properties": ' + DEEP.decode() + "}", msgs(GOOD))}),
+            "validation_error",
+            "/e",
+            "the schema is nested too deeply",
+        ),
     ]
 
 
