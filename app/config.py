@@ -16,6 +16,9 @@ from pydantic import Field, field_validator, model_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 DEFAULT_DATABASE_URL = "sqlite:///./mapwise.db"
+# A map cell written as text: a number of up to 17 significant digits and its separators,
+# with room for a DCM's keywords or a JSON document's brackets.
+MAP_FILE_BYTES_PER_CELL = 32
 
 
 def physical_memory_mb() -> float | None:
@@ -297,6 +300,13 @@ class Settings(BaseSettings):
     @property
     def max_whole_bytes(self) -> int:
         return int(min(self.max_whole_mb, self.max_upload_mb) * 1024 * 1024)
+
+    @property
+    def max_map_file_bytes(self) -> int:
+        """Largest imported map file (JSON, CSV or DCM): 32 bytes a cell of ``max_cells``, at
+        least 1 MiB, never over the whole-read limit. It is parsed whole, at some 30 times its
+        size, so a file that cannot hold an allowed map is refused before it is read."""
+        return min(self.max_whole_bytes, max(1 << 20, MAP_FILE_BYTES_PER_CELL * self.max_cells))
 
     @property
     def max_json_bytes(self) -> int:

@@ -8,7 +8,7 @@ from fastapi import APIRouter, Query, Request
 
 from app.api.deps import MAX_ID, Id, ServicesDep
 from app.api.schemas import ERRORS, BaseMapOut, PageOut, PromoteIn
-from app.errors import InvalidRequestError, MalformedRequestError
+from app.errors import InvalidRequestError, MalformedRequestError, PayloadTooLargeError
 from app.services.base_map_edits import edited_map
 
 router = APIRouter(prefix="/base-maps", tags=["base maps"], responses=ERRORS)
@@ -47,7 +47,15 @@ async def create_base_map(request: Request, services: ServicesDep) -> BaseMapOut
         upload = form.get("file")
         if upload is None or isinstance(upload, str):
             raise InvalidRequestError("a map file is required", field="file")
-        data = await upload.read()
+        limit = services.settings.max_map_file_bytes
+        data = await upload.read(limit + 1)  # never more: it is parsed whole
+        if len(data) > limit:
+            size = f"{upload.size:,} bytes" if upload.size is not None else "larger"
+            raise PayloadTooLargeError(
+                f"the map file is {size}; a map of at most {services.settings.max_cells:,} "
+                f"cells (MAPWISE_MAX_CELLS) takes at most {limit:,} bytes",
+                field="file",
+            )
         name = form.get("name")
         base_map = await run_in_threadpool(
             services.base_maps.import_file,

@@ -1,6 +1,7 @@
-"""JSON bodies are parsed whole in the API process, so their size is bounded before they are
-read (413, field ``body``, ``MAPWISE_MAX_JSON_MB``) and a document nested too deeply to parse
-is a 422 naming where it came from, never a 500 (docs/configuration.md)."""
+"""JSON bodies and imported map files are parsed whole in the API process, so their size is
+bounded before they are read (413: field ``body``, ``MAPWISE_MAX_JSON_MB``; field ``file``,
+32 bytes a cell of ``MAPWISE_MAX_CELLS``), and a document nested too deeply to parse is a
+422 naming where it came from, never a 500 (docs/configuration.md)."""
 
 from __future__ import annotations
 
@@ -76,3 +77,23 @@ def test_json_nested_too_deeply_is_422_naming_where(database_url: str) -> None:
         assert base_map.json()["error"]["field"] == "file"
         assert "nested too deeply" in base_map.json()["error"]["message"]
         assert _stored(client) == before
+
+
+def test_a_map_file_too_large_for_any_allowed_map_is_413_unread(database_url: str) -> None:
+    """A map file is parsed whole: one over 32 bytes a cell of MAPWISE_MAX_CELLS (at least
+    1 MiB) is refused before it is read; one that fits is imported."""
+    settings = service_settings(database_url, max_cells=100)
+    assert settings.max_map_file_bytes == 1 << 20
+    with TestClient(create_app(settings, execute_runs=False)) as client:
+        before = _stored(client)
+        axes = [{"name": "u1", "breakpoints": [0.0, 1.0]}, {"name": "u2", "breakpoints": [0, 1]}]
+        fits = json.dumps({"axes": axes, "values": [[1.0, 2.0], [3.0, 4.0]]})
+        padded = fits[:-1] + ', "pad": "' + "x" * (1 << 20) + '"}'
+        response = client.post("/api/base-maps", files={"file": ("m.json", padded)})
+        assert response.status_code == 413, response.text
+        error = response.json()["error"]
+        assert (error["code"], error["field"]) == ("payload_too_large", "file")
+        assert "at most 100 cells" in error["message"]
+        assert _stored(client) == before
+        response = client.post("/api/base-maps", files={"file": ("m.json", fits)})
+        assert response.status_code == 201, response.text
