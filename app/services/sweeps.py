@@ -90,10 +90,53 @@ class BatchRequest(BaseModel):
     name: str | None = Field(None, max_length=200, json_schema_extra=name_schema)
 
 
+# The scalar metrics a run records (:func:`estimation.metrics.score_run` and the run's
+# results: known-truth, output, torque and bookkeeping figures) and the prefixes of its
+# families (held-out prediction, NIS, residual whiteness); a sweep ranks by one of them.
+RANK_METRICS = frozenset(
+    {
+        "output_rmse", "rmse", "map_rmse", "max_abs_error", "mean_relative_error",
+        "coverage", "visited_cells", "ise", "mae", "sd", "accepted", "samples", "run_s",
+    }
+)  # fmt: skip
+RANK_METRIC_FAMILIES = ("holdout:", "nis:", "residual:")
+
+
+def check_metric(metric: str) -> str:
+    """``metric`` if a run can record it, else a 422 on ``metric`` naming those it can."""
+    if metric in RANK_METRICS or metric.startswith(RANK_METRIC_FAMILIES):
+        return metric
+    known = ", ".join(sorted(RANK_METRICS))
+    families = ", ".join(f"{f}…" for f in RANK_METRIC_FAMILIES)
+    raise InvalidRequestError(
+        f"no run records a metric {metric!r}; rank by one of {known} or {families}",
+        field="metric",
+    )
+
+
+def check_parameter_keys(parameters: dict[str, Values]) -> None:
+    """Each key a dotted config path with no empty part, none inside another's section
+    (``sensor`` and ``sensor.lag`` would each set ``sensor.lag``): else a 422 naming it."""
+    paths = {key: tuple(key.split(".")) for key in parameters}
+    for key, path in paths.items():
+        if not all(part.strip() for part in path):
+            raise InvalidRequestError(
+                f"{key!r} is not a config key: a dotted key has no empty part",
+                field=f"parameters.{key}",
+            )
+        for other, other_path in paths.items():
+            if other != key and other_path[: len(path)] == path:
+                raise InvalidRequestError(
+                    f"{key!r} and {other!r} both set {other!r}: vary the section or its key",
+                    field=f"parameters.{key}",
+                )
+
+
 def expand_parameters(
     parameters: dict[str, Values], *, samples: int | None, seed: int
 ) -> list[dict[str, Any]]:
     """The parameter sets of a sweep: the grid (``samples`` None) or a seeded sample."""
+    check_parameter_keys(parameters)
     if samples is None:
         ranges = [k for k, v in parameters.items() if isinstance(v, Range)]
         if ranges:
@@ -175,6 +218,7 @@ class SweepService:
     def create_sweep(self, request: SweepRequest) -> GroupView:
         self.runs.need_executor()
         name = _group_name(request.name)
+        check_metric(request.metric)
         points = expand_parameters(request.parameters, samples=request.samples, seed=request.seed)
         base = request.model_dump(mode="json", include={"dataset_id", "estimator", "signals"})
         table = None if request.table is None else request.table.model_dump(mode="json")

@@ -82,7 +82,20 @@ def test_a_random_sweep_is_seeded_and_bad_values_store_nothing(client: TestClien
     grid = {"sigma_w": list(range(1, 60)), "p0": list(range(1, 60))}  # 3481 points
     too_big = client.post("/api/sweeps", json=_sweep_body(dataset["id"], parameters=grid))
     assert too_big.status_code == 422
+    for parameters, field in (
+        ({"sensor": [None], "sensor.lag": [0.9]}, "parameters.sensor"),  # once a 500
+        ({"sensor.lag": [0.9], "sensor": [0.5]}, "parameters.sensor"),
+        ({"sensor..lag": [0.9]}, "parameters.sensor..lag"),
+    ):
+        overlap = client.post("/api/sweeps", json=_sweep_body(dataset["id"], parameters=parameters))
+        assert overlap.status_code == 422, overlap.text
+        assert overlap.json()["error"]["field"] == field
+    unknown = client.post("/api/sweeps", json=_sweep_body(dataset["id"], metric="nonsense"))
+    assert unknown.status_code == 422, unknown.text
+    assert unknown.json()["error"]["field"] == "metric"
+    assert "output_rmse" in unknown.json()["error"]["message"]
     assert client.get("/api/runs", params={"limit": 1}).json()["total"] == before
+    assert client.get("/api/sweeps").json()["total"] == 1
 
 
 def test_a_fleet_batch_merges_the_vehicles_maps(client: TestClient) -> None:
