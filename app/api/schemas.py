@@ -301,7 +301,7 @@ class VersionOut(VersionSummaryOut):
 class LabelIn(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
-    label: str | None = Field(max_length=200)
+    label: Annotated[str, Field(max_length=200, json_schema_extra=name_schema)] | None
 
 
 class RunRenameIn(BaseModel):

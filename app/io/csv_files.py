@@ -43,6 +43,7 @@ from app.io.csv_sniff import (
     split_header,
     time_scale,
 )
+from app.io.names import bad_character, check_name
 from estimation import Signals
 from estimation.errors import SignalError
 
@@ -301,6 +302,9 @@ def read_header(
                 field=f"units.{name}",
             )
         unit_of[name] = str(unit)
+    for name, unit in unit_of.items():  # the rule of names: no control or formatting character
+        if bad_character(unit) is not None:
+            check_name(unit, field=name, what=f"the unit of column {name!r},")
     if decimal is None:
         cells = cell_columns(
             [ln for _, ln in sample], [n for n, _ in sample], delimiter, len(names)

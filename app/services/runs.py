@@ -246,6 +246,10 @@ class RunService:
             return VersionRepo(s).latest(run_id)
 
     def label(self, run_id: int, version_id: int, label: str | None) -> VersionSummary:
+        """Label a map version (``None`` clears it); 422 naming ``label`` for a control or
+        formatting character, as for every name."""
+        if label is not None:
+            label = check_name(label, field="label", what="version label")
         with self.db.write() as s:
             return VersionRepo(s).set_label(run_id, version_id, label)
 

@@ -49,6 +49,14 @@ def test_numbers_are_1_to_n_per_run(client: TestClient, two_runs) -> None:
     assert (doc["number"], doc["id"]) == (2, second[1]["id"])
     labelled = client.patch(f"/api/runs/{run_id}/versions/{second[2]['id']}", json={"label": "x"})
     assert labelled.json()["number"] == 3
+    for bad in ("a\u0000b", "bench\u202e1"):  # a NUL, a right-to-left override
+        refused = client.patch(
+            f"/api/runs/{run_id}/versions/{second[2]['id']}", json={"label": bad}
+        )
+        assert refused.status_code == 422, refused.text
+        assert refused.json()["error"]["field"] == "label"
+    kept = client.get(f"/api/runs/{run_id}/versions/{second[2]['id']}").json()
+    assert kept["label"] == "x"
     compared = client.get("/api/compare", params={"runs": f"{two_runs[0]['id']},{run_id}"})
     assert [r["final_version"]["number"] for r in compared.json()["runs"]] == [3, 4]
 

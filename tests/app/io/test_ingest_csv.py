@@ -397,3 +397,19 @@ def test_adapt_drops_a_column_that_is_not_plain_numbers() -> None:
     assert log.signals.names == ["a"]
     with pytest.raises(InputError, match="'1_000' is not a plain number"):
         parse_csv("time,a,b\n0,1,1_000\n1,2,2\n", columns=["b"])
+
+
+@pytest.mark.parametrize(
+    ("data", "units"),
+    [
+        ("time,a [r\u202epm]\n0,1\n1,2\n".encode(), None),  # a right-to-left override
+        (b"time,a\n0,1\n1,2\n", {"a": "r\x00pm"}),  # a NUL, from the units field
+        ("time,a\ns,r\u200bpm\n0,1\n1,2\n".encode(), None),  # a zero-width space, units row
+    ],
+)
+def test_a_unit_with_a_control_or_formatting_character_is_refused(
+    data: bytes, units: dict[str, str] | None
+) -> None:
+    with pytest.raises(InputError, match="the unit of column 'a'") as info:
+        ingest(data, units=units)
+    assert info.value.field == "a"
