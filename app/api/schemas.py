@@ -5,15 +5,18 @@ Routers build these from domain objects; arrays are nested lists with ``null`` f
 
 from __future__ import annotations
 
+import json
 from datetime import datetime
 from typing import Annotated, Any, Generic, Literal, TypeVar
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from app.domain import BaseMap, Dataset, MapVersion, Run, RunStatus, SeriesRole, VersionSummary
 from app.io.decimate import nested_or_none
 from app.io.names import name_schema
 from app.services.catalog import ScenarioName
+
+MAX_EDITS_BYTES = 256 * 1024  # a base map's edit lineage, as compact JSON
 
 T = TypeVar("T")
 
@@ -413,8 +416,23 @@ class PromoteIn(BaseModel):
     edits: list[dict[str, Any]] | None = Field(
         None,
         max_length=2000,
-        description="The editing operations that led to `values` (kept as lineage.config.edits).",
+        description="The editing operations that led to `values` (kept as lineage.config.edits), "
+        f"at most {MAX_EDITS_BYTES // 1024} KiB as JSON.",
     )
+
+    @field_validator("edits")
+    @classmethod
+    def _edits_fit(cls, edits: list[dict[str, Any]] | None) -> list[dict[str, Any]] | None:
+        """The lineage is stored with the map and sent with every page of base maps: it is
+        a record of the edits, not a place for documents."""
+        if edits is not None:
+            size = len(json.dumps(edits, separators=(",", ":")))
+            if size > MAX_EDITS_BYTES:
+                raise ValueError(
+                    f"the edits take {size:,} bytes as JSON; at most {MAX_EDITS_BYTES:,}"
+                )
+        return edits
+
     source: Literal["run", "edit"] | None = Field(
         None, description='"edit" when values or edits are given, else "run".'
     )

@@ -161,3 +161,10 @@ def test_non_finite_values_and_source_run_with_values_are_refused(
     response = client.post("/api/base-maps", json=base | {"edits": ["smooth"]})
     assert response.status_code == 422, response.text
     assert response.json()["error"]["field"].startswith("edits")
+    before = client.get("/api/base-maps").json()["total"]
+    notes = [{"op": "note", "text": "x" * 5000}] * 60  # 2000 items are allowed, not 300 KB
+    response = client.post("/api/base-maps", json=base | {"edits": notes})
+    assert response.status_code == 422, response.text
+    assert response.json()["error"]["field"] == "edits"
+    assert "at most 262,144" in response.json()["error"]["message"]
+    assert client.get("/api/base-maps").json()["total"] == before
