@@ -277,7 +277,9 @@ export function showError(container, err, { prefix = "" } = {}) {
     control.setAttribute("aria-invalid", "true");
     const described = control.getAttribute("aria-describedby");
     control.setAttribute("aria-describedby", described ? `${described} ${id}` : id);
-    if (typeof control.focus === "function") control.focus({ preventScroll: false });
+    // The field and its message mid-screen: a sticky action bar may cover the page's bottom.
+    if (typeof control.focus === "function") control.focus({ preventScroll: true });
+    host.scrollIntoView({ block: "center" });
     return note;
   }
   const banner = container.querySelector(SEL.formError);

@@ -113,6 +113,20 @@ function humanise(key) {
   return key.replaceAll("_", " ").replace(/^\w/, (c) => c.toUpperCase());
 }
 
+/**
+ * What a cleared number or list field means: none where the schema allows it, an empty list
+ * where that is the default, else an error on the field. Never a silent server default: the
+ * run's record would not say what it ran with.
+ */
+function blankValue(prop, inner, nullable, label, name) {
+  if (nullable) return null;
+  const fallback = prop.default ?? inner.default;
+  if (Array.isArray(fallback) && fallback.length === 0) return [];
+  const shown = Array.isArray(fallback) ? fallback.join(", ") : fallback;
+  const hint = fallback === undefined ? "" : ` (the default is ${shown})`;
+  throw Object.assign(new Error(`${label}: give a value${hint}`), { field: name });
+}
+
 function control(schema, prop, path, start, opts) {
   const { inner, nullable, alternatives } = unwrap(prop, schema);
   const key = path.at(-1);
@@ -209,7 +223,7 @@ function control(schema, prop, path, start, opts) {
     });
     read = () => {
       const raw = input.value.trim();
-      if (!raw) return nullable ? null : undefined;
+      if (!raw) return blankValue(prop, inner, nullable, label, name);
       let list;
       try {
         list = parseNumberList(raw);
@@ -233,7 +247,7 @@ function control(schema, prop, path, start, opts) {
     });
     read = () => {
       const raw = input.value.trim();
-      if (raw === "") return nullable ? null : undefined;
+      if (raw === "") return blankValue(prop, inner, nullable, label, name);
       const v = Number(raw);
       if (!Number.isFinite(v))
         throw Object.assign(new Error(`${label}: "${raw}" is not a number`), { field: name });

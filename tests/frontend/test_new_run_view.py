@@ -226,3 +226,25 @@ def test_a_refused_run_among_several_reports_the_started_ones(
     expect(page.locator("[data-metrics-table] tbody tr")).to_have_count(2)
     for r in runs:
         wait_run(api, r["id"])
+
+
+def test_a_cleared_number_is_an_error_in_view_never_a_silent_default(page: Page, api) -> None:
+    """A blank σw once started a run with the server's default, which its record did not
+    show; now the field says it needs a value, mid-screen, not under the sticky action bar."""
+    dataset = upload_example(api, f"blank-{uuid.uuid4().hex[:8]}")
+    posts = post_runs(page)
+    page.goto(run_form_url(dataset["id"]))
+    default = api.get("/api/estimators").json()["items"]
+    sigma_w = next(e for e in default if e["name"] == "skf")["defaults"]["sigma_w"]
+    page.fill("#cfg-skf-sigma_w", "")
+    page.locator("[data-start]").click()
+    error = page.locator(".field:has(#cfg-skf-sigma_w) .field-error")
+    expect(error).to_contain_text(f"give a value (the default is {sigma_w:g})")
+    expect(page.locator("#cfg-skf-sigma_w")).to_be_focused()
+    expect(error).to_be_in_viewport()
+    bar = page.locator(".form-actions").first.bounding_box()
+    box = error.bounding_box()
+    assert bar is not None
+    assert box is not None
+    assert box["y"] + box["height"] <= bar["y"], (box, bar)  # not hidden behind the bar
+    assert posts == [], "a run was posted with a blank field"
