@@ -12,6 +12,7 @@ from playwright.sync_api import Page, expect
 
 from tests.frontend.browser import plot_data, shot, upload_example, wait_run
 from tests.frontend.test_run_view import heatmap_z, run_form_url
+from tests.support.server import run_body
 
 GRID = {
     "axes": [
@@ -166,3 +167,57 @@ def test_scrub_and_play_versions_then_label_and_export(page: Page, api, tmp_path
     page.reload()
     expect(page.locator("#version-a")).to_have_value(str(a["number"]))
     expect(page.locator("#version-b")).to_have_value(str(b["number"]))
+
+
+def _bar_log(n: int = 2000) -> str:
+    """``u1 [rpm], u2 [mg/stroke], y`` over the 4×4 grid of ``run_body``, ``y`` a few bar."""
+    rows = ["time [s],u1 [rpm],u2 [mg/stroke],y"]
+    for k in range(n):
+        u1, u2 = 500 + (k * 37) % 3000, (k * 11) % 60
+        rows.append(f"{k / 50},{u1},{u2},{1 + u1 / 1000 + u2 / 100 + (k % 7) / 100}")
+    return "\n".join(rows) + "\n"
+
+
+def test_runs_of_different_quantities_get_their_own_scale_and_best(page: Page, api) -> None:
+    """NOx runs in ppm beside a run whose output is in bar: each quantity has its own colour
+    scale and its own best, never a bar error "better" than a ppm one."""
+    dataset = upload_example(api, f"mixed-{uuid.uuid4().hex[:8]}")
+    ppm = [start_run(api, dataset["id"], e)["id"] for e in ("skf", "kf")]
+    other = api.post(
+        "/api/datasets",
+        files={"file": ("bar.csv", _bar_log(), "text/csv")},
+        data={"name": f"bar-{uuid.uuid4().hex[:8]}", "units": json.dumps({"y": "bar"})},
+    )
+    assert other.status_code == 201, other.text
+    created = api.post("/api/runs", json=run_body(other.json()["id"], "skf"))
+    assert created.status_code == 201, created.text
+    bar = created.json()["id"]
+    for run_id in (*ppm, bar):
+        wait_run(api, run_id)
+    page.goto(f"/compare?runs={ppm[0]},{ppm[1]},{bar}")
+    expect(
+        page.get_by_role("heading", name="Final maps · one colour scale per quantity")
+    ).to_be_visible()
+    for run_id in (*ppm, bar):
+        expect(page.locator(f'[data-plot="final-{run_id}"] .main-svg').first).to_be_attached()
+    ranges = {
+        i: page.eval_on_selector(
+            f'[data-plot="final-{i}"]', "el => [el.data[0].zmin, el.data[0].zmax]"
+        )
+        for i in (*ppm, bar)
+    }
+    assert ranges[ppm[0]] == ranges[ppm[1]] != ranges[bar]
+    table = page.locator("[data-metrics-table]")
+    expect(table.locator("tbody tr", has_text="succeeded")).to_have_count(3, timeout=30_000)
+    best = dict(
+        table.evaluate(
+            """t => {
+              const head = [...t.tHead.rows[0].cells];
+              const i = head.findIndex((c) => c.querySelector('[data-sort="m:output_rmse"]'));
+              return [...t.tBodies[0].rows].map((r) => [
+                Number(r.dataset.runId), r.cells[i].classList.contains("best")]);
+            }"""
+        )
+    )
+    assert best[bar] is False  # alone in bar: nothing to be better than
+    assert [best[i] for i in ppm].count(True) == 1, best

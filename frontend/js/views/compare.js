@@ -42,6 +42,9 @@ const HIGHER_BETTER = new Set(["coverage"]);
 const NEUTRAL = new Set(["samples", "accepted"]);
 /** Columns of the metrics table that are not metrics (a metric's URL key is its own name). */
 const PLAIN_COLUMNS = new Set(["id", "estimator", "status"]);
+/** Metrics that compare across quantities (a share, a run time, a normalised innovation). */
+const CROSS_QUANTITY = (metric) =>
+  metric === "coverage" || metric === "run_s" || metric.startsWith("nis:");
 const SORT_DIRS = { asc: 1, desc: -1 };
 
 /** "output_rmse:desc" → {key: "m:output_rmse", dir: -1}; "id:asc" → {key: "id", dir: 1}. */
@@ -66,6 +69,12 @@ export async function mount(root, ctx) {
     estimators(),
     api.all("/api/datasets", { signal: ctx.signal }),
   ]);
+  /** What a run's map and errors are in: the unit of its output or map, else their name.
+   * Runs of different quantities get their own colour scale and their own "best". */
+  const quantityKey = (run) => {
+    const { label, unit } = runQuantity(run, datasets);
+    return unit || `\u0000${label}`;
+  };
 
   root.append(
     pageHead({
@@ -190,14 +199,24 @@ export async function mount(root, ctx) {
         return (va > vb ? 1 : va < vb ? -1 : 0) * view.sort.dir;
       });
     }
+    // "Best" compares like with like: an error in ppm is never better than one in kg/s.
+    const groupOf = (c, r) => (CROSS_QUANTITY(c.metric) ? "" : quantityKey(r));
     const best = {};
     for (const c of columns.filter((x) => x.metric && !NEUTRAL.has(x.metric))) {
-      const vals = runs.map(c.value).filter((v) => typeof v === "number");
-      if (vals.length > 1)
-        best[c.key] = HIGHER_BETTER.has(c.metric)
-          ? Math.max(...vals)
-          : Math.min(...vals.map(Math.abs));
+      best[c.key] = new Map();
+      for (const group of new Set(runs.map((r) => groupOf(c, r)))) {
+        const vals = runs
+          .filter((r) => groupOf(c, r) === group)
+          .map(c.value)
+          .filter((v) => typeof v === "number");
+        if (vals.length > 1)
+          best[c.key].set(
+            group,
+            HIGHER_BETTER.has(c.metric) ? Math.max(...vals) : Math.min(...vals.map(Math.abs)),
+          );
+      }
     }
+    const bestOf = (c, r) => best[c.key]?.get(groupOf(c, r));
     const head = h(
       "tr",
       {},
@@ -252,12 +271,12 @@ export async function mount(root, ctx) {
             );
           }
           if (c.metric === "run_s")
-            return h("td", { class: `num${best[c.key] === v ? " best" : ""}` }, fmtDuration(v));
+            return h("td", { class: `num${bestOf(c, r) === v ? " best" : ""}` }, fmtDuration(v));
+          const top = c.metric ? bestOf(c, r) : undefined;
           const isBest =
-            c.metric &&
-            best[c.key] !== undefined &&
+            top !== undefined &&
             typeof v === "number" &&
-            (HIGHER_BETTER.has(c.metric) ? v === best[c.key] : Math.abs(v) === best[c.key]);
+            (HIGHER_BETTER.has(c.metric) ? v === top : Math.abs(v) === top);
           return h(
             "td",
             { class: `num${isBest ? " best" : ""}`, title: isBest ? "best" : null },
@@ -266,9 +285,12 @@ export async function mount(root, ctx) {
         }),
       ),
     );
+    const mixed = new Set(runs.map(quantityKey)).size > 1;
     return card({
       title: "Metrics",
-      hint: "click a column to sort; best in green",
+      hint: mixed
+        ? "click a column to sort; best in green among runs of the same quantity"
+        : "click a column to sort; best in green",
       bodyCls: "flush",
       body: h(
         "div",
@@ -284,13 +306,19 @@ export async function mount(root, ctx) {
   }
 
   function finalMapsCard(mapRuns) {
-    // One colour scale for all maps; its ends are the 2–98 % quantiles so one wild cell
-    // does not wash out the rest (hover still shows the true values).
-    const all = mapRuns
-      .flatMap((r) => r.final_version.values.flat(Infinity))
-      .filter((v) => v !== null && Number.isFinite(v));
-    const range = all.length ? [quantile(all, 0.02), quantile(all, 0.98)] : null;
+    // One colour scale for the maps of one quantity (never ppm and kg/s on one scale); its
+    // ends are the 2–98 % quantiles so one wild cell does not wash out the rest (hover
+    // still shows the true values).
+    const ranges = new Map();
+    for (const key of new Set(mapRuns.map(quantityKey))) {
+      const all = mapRuns
+        .filter((r) => quantityKey(r) === key)
+        .flatMap((r) => r.final_version.values.flat(Infinity))
+        .filter((v) => v !== null && Number.isFinite(v));
+      ranges.set(key, all.length ? [quantile(all, 0.02), quantile(all, 0.98)] : null);
+    }
     const tiles = mapRuns.map((r) => {
+      const range = ranges.get(quantityKey(r));
       const el = h("div", {
         class: "plot small",
         "data-plot": `final-${r.id}`,
@@ -314,7 +342,13 @@ export async function mount(root, ctx) {
     return h(
       "section",
       { "aria-label": "Final maps" },
-      h("h3", { style: { margin: "6px 0 10px" } }, "Final maps · shared colour scale"),
+      h(
+        "h3",
+        { style: { margin: "6px 0 10px" } },
+        ranges.size > 1
+          ? "Final maps · one colour scale per quantity"
+          : "Final maps · shared colour scale",
+      ),
       h("div", { class: "map-tiles" }, tiles),
     );
   }
