@@ -117,3 +117,9 @@ def runs_from_the_form_with_its_defaults(page: Page, api: httpx.Client, estimato
         rmse_cards = page.locator('[data-metric$="rmse"]')
         for k in range(rmse_cards.count()):
             expect(rmse_cards.nth(k).locator(".u")).not_to_be_empty()
+    # The measured output's RMSE is in the residual's unit, whatever the map's (the EKF's
+    # map q is relative, its output the MAF's kg/s).
+    lines = api.get(f"/api/runs/{run_id}/series", params={"points": 2}).json()["series"]
+    residual_unit = (lines.get("residual") or {}).get("unit")
+    if "output_rmse" in run["metrics"] and residual_unit not in (None, "", "-"):
+        expect(page.locator('[data-metric="output_rmse"] .u')).to_have_text(residual_unit)

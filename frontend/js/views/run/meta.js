@@ -227,9 +227,18 @@ function metricCards(v) {
     if (isTorque && (k === "mae" || k === "sd")) return torqueUnit;
     if (isTorque && k === "ise") return torqueUnit === "N·m" ? "N²·m²·s" : `(${torqueUnit})²·s`;
     if (k === "coverage") return "";
-    if (/rmse|max_abs|^holdout:.*mae$|^nis:innovation_mean$|^residual:(mean|rms)$/.test(k)) {
-      // An observer without an output channel (the joint EKF) scores its own estimate.
-      return isTorque ? torqueUnit : outputUnit || s.series.pick("estimate")?.unit || "";
+    if (isTorque && /rmse|max_abs/.test(k)) return torqueUnit;
+    // The measured output's errors are in its unit (the residual's): for the EKF's map q
+    // (relative) that is the MAF's kg/s, not the map's unit.
+    if (
+      /^output_rmse$|^holdout:.*(rmse|mae|max_abs_error)$|^nis:innovation_mean$|^residual:(mean|rms)$/.test(
+        k,
+      )
+    )
+      return s.series.pick("residual")?.unit || outputUnit || "";
+    if (/rmse|max_abs/.test(k)) {
+      // The map's errors; an observer without an output channel scores its own estimate.
+      return outputUnit || s.series.pick("estimate")?.unit || "";
     }
     return "";
   };
