@@ -156,9 +156,11 @@ def admit_run(
     streamed: bool = False,
     gates: int = 0,
     raster: bool = False,
+    samples_field: str = "dataset_id",
 ) -> Prediction:
     """Check a planned run against ``limits``; an :class:`OverBudgetError` naming the field
-    to change if it does not fit, else the predicted figures."""
+    to change if it does not fit (``samples_field`` where the samples are too many: the
+    dataset, or the raster that made them), else the predicted figures."""
     check_cells(cells, limits, field=table_field, spec=spec)
     cost = spec.cost
     held = min(samples, STREAM_ROWS) if streamed else samples  # rows in memory at once
@@ -177,7 +179,7 @@ def admit_run(
             f"{spec.name} on {cells:,} cells and {samples:,} samples: predicted "
             f"{human_bytes(memory)} > {human_bytes(limits.run_memory_bytes)} run budget "
             "(MAPWISE_RUN_MEMORY_MB)",
-            field=table_field if grows_with_table else "dataset_id",
+            field=table_field if grows_with_table else samples_field,
         )
     versions = math.ceil(samples / version_every) + 1  # the cadence's versions and the final
     segments = FLOAT_BYTES * (len(spec.output_units) + 1) * samples
@@ -202,7 +204,7 @@ def admit_run(
             f"{spec.name} on {cells:,} cells and {samples:,} samples: at least "
             f"{human_seconds(compute_s)} of computation > {human_seconds(limits.run_max_s)} "
             "run budget (MAPWISE_RUN_MAX_S)",
-            field=table_field if cells else "dataset_id",
+            field=table_field if cells else samples_field,
         )
     duration = compute_s
     if pace is not None:

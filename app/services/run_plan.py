@@ -29,6 +29,7 @@ from estimation.registry import EstimatorSpec, registry
 from estimation.table import Axis, Grid, broadcast_cells
 
 SERVICE_KEYS = ("pace", "version_every", "gates", "locked", "raster")
+MIN_RUN_SAMPLES = 2  # as an upload needs: one sample has no step, no time base
 
 
 class AxisSpec(BaseModel):
@@ -311,6 +312,7 @@ def plan_run(
             streamed=streamed,
             gates=len(options.gates),
             raster=dataset.recorded,
+            samples_field="config.raster" if run_raster(config) is not None else "dataset_id",
         )
 
     # Refused before the estimator is built (a huge table allocates); predicted as its spec
@@ -366,14 +368,22 @@ def _rows(dataset: Dataset, names: list[str], config: dict[str, Any]) -> tuple[i
             field="config.raster",
         )
     if raster.channel is None:
-        return dataset.rows_for(names, raster.step)
-    timing = dataset.timing_of(raster.channel)
-    if timing is None:
+        rows, rate_hz = dataset.rows_for(names, raster.step)
+    else:
+        timing = dataset.timing_of(raster.channel)
+        if timing is None:
+            raise InvalidRequestError(
+                f"raster channel {raster.channel!r} is not in dataset {dataset.id}",
+                field="config.raster",
+            )
+        rows, rate_hz = dataset.rows_for([*names, raster.channel], timing[2])
+    if rows < MIN_RUN_SAMPLES:  # the rule of an upload's samples, for a run's raster
         raise InvalidRequestError(
-            f"raster channel {raster.channel!r} is not in dataset {dataset.id}",
+            f"the raster gives {rows} sample{'s' if rows != 1 else ''} over the log; a run "
+            f"needs at least {MIN_RUN_SAMPLES}: choose a finer raster",
             field="config.raster",
         )
-    return dataset.rows_for([*names, raster.channel], timing[2])
+    return rows, rate_hz
 
 
 def _check_delay(model: BaseModel, dataset: Dataset, rows: int) -> None:

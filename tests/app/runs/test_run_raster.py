@@ -130,6 +130,8 @@ def test_a_bad_run_raster_is_refused_naming_its_field(
         ("fast please", "not understood"),
         ("channel:nope", "raster channel 'nope' is not in dataset"),
         (5, "must be a string"),
+        ("100s", "the raster gives 1 sample over the log"),  # the log spans 2 s
+        ("1e-9s", "run budget"),  # billions of samples: over budget because of the raster
     ):
         response = client.post("/api/runs", json=_body(dataset["id"], STATUS_AXIS, raster=raster))
         assert response.status_code == 422, response.text
