@@ -47,6 +47,8 @@ MEMO_SIZE = 4
 
 _PROJECT = re.compile(rb"/begin\s+PROJECT\b")
 _MODULE = re.compile(rb"/begin\s+MODULE\b")
+_END_MODULE = re.compile(rb"/end\s+MODULE\b")
+_END_PROJECT = re.compile(rb"/end\s+PROJECT\b")
 _PARSER_MESSAGE = re.compile(r"\[(?:error|warning)\]\s*(.*)$", re.IGNORECASE)
 _UTF8_BOM = b"\xef\xbb\xbf"
 _MEMO: OrderedDict[tuple[str, int, int], A2lFile] = OrderedDict()
@@ -187,6 +189,13 @@ def _sniff(data: bytes) -> None:
         raise InputError("not an A2L file: no '/begin PROJECT' block (ASAM MCD-2 MC)", field="a2l")
     if not _MODULE.search(data):
         raise InputError("not an A2L file: no '/begin MODULE' block in the PROJECT", field="a2l")
+    # pya2ldb reads a file cut between two blocks as a smaller whole one: a truncated upload
+    # would become an ECU missing its later characteristics, without a word.
+    for end, block in ((_END_MODULE, "MODULE"), (_END_PROJECT, "PROJECT")):
+        if not end.search(data):
+            raise InputError(
+                f"the A2L file ends before '/end {block}': it is truncated", field="a2l"
+            )
 
 
 def _parse(data: bytes, sha256: str, cache_dir: Path) -> Summary:

@@ -453,13 +453,18 @@ def test_a_linked_table_that_does_not_fit_the_map_is_refused(
 def test_an_a2l_the_parser_refuses_is_a_422_and_nothing_is_stored(
     client: TestClient, database_url: str, a2l_bytes: bytes
 ) -> None:
-    """Past the sniff (PROJECT and MODULE are there) but cut off inside a CHARACTERISTIC:
-    pya2ldb's parser refuses it; 422 naming ``a2l``, and no row is written."""
+    """Cut off inside a CHARACTERISTIC: the sniff sees no '/end MODULE' and calls it
+    truncated; with the ends named in a comment it passes the sniff and pya2ldb's parser
+    refuses it. Each is a 422 naming ``a2l``, and no row is written."""
     cut = a2l_bytes[: a2l_bytes.index(b"/begin CHARACTERISTIC") + 40]
     before = _count(database_url)
-    response = client.post("/api/ecus", files={"a2l": ("cut.a2l", cut)})
-    assert response.status_code == 422, response.text
-    error = response.json()["error"]
-    assert error["field"] == "a2l"
-    assert "does not parse" in error["message"], error
+    for data, message in (
+        (cut, "ends before '/end MODULE': it is truncated"),
+        (cut + b"\n/* /end MODULE /end PROJECT */\n", "does not parse"),
+    ):
+        response = client.post("/api/ecus", files={"a2l": ("cut.a2l", data)})
+        assert response.status_code == 422, response.text
+        error = response.json()["error"]
+        assert error["field"] == "a2l"
+        assert message in error["message"], error
     assert _count(database_url) == before

@@ -367,11 +367,14 @@ def test_concurrent_first_opens_agree(a2l_cache_dir: Path) -> None:
         (b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR", "binary"),
         (b"hello, this is a text file\n", "no '/begin PROJECT'"),
         pytest.param(
-            b'/begin PROJECT P ""\n /begin MODULE M ""\n /begin CHARACTERISTIC\n',
+            b'/begin PROJECT P ""\n /begin MODULE M ""\n /begin CHARACTERISTIC\n'
+            b"/* /end MODULE /end PROJECT */\n",  # ends named only in a comment: cut mid-block
             "does not parse",
             marks=pytest.mark.slow,  # runs the parser
         ),
         (b'/begin PROJECT P ""\n/end PROJECT\n', "no '/begin MODULE'"),
+        (MINI_A2L.encode().split(b"/end MODULE")[0], "ends before '/end MODULE'"),
+        (MINI_A2L.encode().rsplit(b"/end PROJECT")[0], "ends before '/end PROJECT'"),
     ],
 )
 def test_a_file_that_is_no_a2l_is_refused_and_not_cached(
