@@ -13,6 +13,7 @@ import numpy as np
 
 from app.domain import MapVersion
 from app.errors import InvalidRequestError
+from estimation.filters.config import MAX_VALUE
 
 
 @dataclass(frozen=True, slots=True)
@@ -65,10 +66,15 @@ def checked_values(values: Any, shape: tuple[int, ...]) -> np.ndarray:
         )
     flat = np.asarray(values, dtype=object).reshape(-1) if shape else [values]
     for k, v in enumerate(flat):
+        where = ", ".join(map(str, np.unravel_index(k, shape))) if shape else ""
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            where = ", ".join(map(str, np.unravel_index(k, shape))) if shape else ""
             raise InvalidRequestError(
                 f"values[{where}] is {v!r}; every cell must be a finite number",
+                field="values",
+            )
+        if abs(v) > MAX_VALUE:  # a run would start from it (θ0) and overflow
+            raise InvalidRequestError(
+                f"values[{where}] is {v!r}; a cell is at most {MAX_VALUE:g} in magnitude",
                 field="values",
             )
     return np.asarray(values, dtype=np.float64)

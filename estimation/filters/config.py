@@ -27,6 +27,9 @@ MAX_SIGMA = 1e75
 room for the products and sums of the covariance update without overflowing float64."""
 MAX_VARIANCE = 1e150
 """Largest variance accepted (P0): ``P0²`` (the update's ``P w wᵀ P``) stays below 1e300."""
+MAX_VALUE = 1e75
+"""Largest start value of a cell accepted (θ0, a table's or base map's values): a residual's
+square, 1e150, and its products with the variances stay finite."""
 
 CellValues = Annotated[
     float | list[Any],
@@ -67,6 +70,13 @@ def _sigma_bound(value: Any) -> Any:
 
 def _variance_bound(value: Any) -> Any:
     return bounded(value, MAX_VARIANCE)
+
+
+def _value_bound(value: Any) -> Any:
+    """Finite values at most :data:`MAX_VALUE` in magnitude; a non-finite one is left to
+    the grid's check, which names its cell."""
+    bounded([v for v in _numbers(value) if math.isfinite(v)], MAX_VALUE)
+    return value
 
 
 #: A standard deviation (σv, σf): finite and at most :data:`MAX_SIGMA`.
@@ -124,7 +134,9 @@ class TableFilterConfig(_Strict):
     axes: list[AxisConfig] = Field(min_length=1, description="Table axes, in order.")
     output: str = Field(min_length=1, description="Channel holding the measured table output.")
     output_unit: str = Field("", description="Unit of the output channel.")
-    theta0: CellValues = Field(0.0, description="Initial table values θ0.")
+    theta0: Annotated[CellValues, AfterValidator(_value_bound)] = Field(
+        0.0, description=f"Initial table values θ0 (finite, |θ0| ≤ {MAX_VALUE:g})."
+    )
     locked: list[list[int]] = Field(
         default_factory=list,
         description="Cells whose value and variance never change, as index lists per axis.",

@@ -115,6 +115,7 @@ def test_values_imply_source_edit_and_edits_alone_keep_the_version(
         ([[1.0, 2.0, 3.0, 4.0]] * 3 + [[1.0, None, 3.0, 4.0]], "values[3, 1] is None"),
         ([[1.0, 2.0, 3.0, 4.0]] * 3 + [[1.0, 2.0, "3", 4.0]], "values[3, 2] is '3'"),
         ([[1.0, 2.0, 3.0, 4.0]] * 3 + [[1.0, 2.0, 3.0, True]], "values[3, 3] is True"),
+        ([[1.0, 2.0, 3.0, 4.0]] * 3 + [[1.0, 2.0, 3.0, -1e308]], "at most 1e+75"),
         (5.0, "valid array"),  # refused by the schema itself
     ],
 )
@@ -168,3 +169,22 @@ def test_non_finite_values_and_source_run_with_values_are_refused(
     assert response.json()["error"]["field"] == "edits"
     assert "at most 262,144" in response.json()["error"]["message"]
     assert client.get("/api/base-maps").json()["total"] == before
+
+
+def test_start_values_near_the_float_limit_are_refused(
+    client: TestClient, finished: dict[str, Any]
+) -> None:
+    """θ0 (in config or as the table's values) is bounded like the sigmas: a run from
+    -1e308 once "succeeded" with NaN metrics and overflow warnings."""
+    dataset_id = finished["dataset"]["id"]
+    before = client.get("/api/runs").json()["total"]
+    theta0 = client.post("/api/runs", json=run_body(dataset_id, theta0=-1e308))
+    table = run_body(dataset_id)
+    table["table"] = {**table["table"], "values": [[1.0] * 4] * 3 + [[1.0, 1.0, 1.0, 1e80]]}
+    valued = client.post("/api/runs", json=table)
+    for response in (theta0, valued):
+        assert response.status_code == 422, response.text
+        error = response.json()["error"]
+        assert "at most 1e+75" in error["message"], error
+    assert theta0.json()["error"]["field"] == "config.theta0"
+    assert client.get("/api/runs").json()["total"] == before
