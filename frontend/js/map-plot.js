@@ -607,10 +607,15 @@ export class MapPlot {
         marker: { size: 11, color: t.activeCell, line: { color: t.trailEdge, width: 2 } },
       });
     }
+    // The y axis says what a 2-D map's colour bar would: hits, variance [unit²], z [σ].
+    const yTitle =
+      this.kind === "value" || this.kind === "diff"
+        ? withUnit(this.barLabel ?? this.label, this.unit)
+        : this.barTitle();
     const layout = baseLayout({
       xaxis: axis(withUnit(a0.name, a0.unit)),
       yaxis: axis(
-        this.kind === "variance" ? "variance" : withUnit(this.label, this.unit),
+        yTitle,
         this.kind === "variance"
           ? { type: "log" }
           : this.range

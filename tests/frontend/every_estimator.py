@@ -117,6 +117,18 @@ def runs_from_the_form_with_its_defaults(page: Page, api: httpx.Client, estimato
         rmse_cards = page.locator('[data-metric$="rmse"]')
         for k in range(rmse_cards.count()):
             expect(rmse_cards.nth(k).locator(".u")).not_to_be_empty()
+    # A 1-D map's plots name what they show on the y axis, as a 2-D map's colour bars do.
+    final = (
+        run["n_versions"]
+        and api.get(f"/api/runs/{run_id}/versions/by-number/{run['n_versions']}").json()
+    )
+    if final and len(final.get("axes") or []) == 1:
+        y_title = "el => el._fullLayout.yaxis.title.text"
+        hits = page.locator('[data-plot="hits"] .main-svg').first
+        hits.wait_for(state="attached")
+        assert page.eval_on_selector('[data-plot="hits"]', y_title) == "hits [samples]"
+        variance = page.eval_on_selector('[data-plot="variance"]', y_title)
+        assert variance.startswith("variance ["), variance
     # The measured output's RMSE is in the residual's unit, whatever the map's (the EKF's
     # map q is relative, its output the MAF's kg/s).
     lines = api.get(f"/api/runs/{run_id}/series", params={"points": 2}).json()["series"]
