@@ -83,6 +83,8 @@ def test_runs_list_filters_pages_groups_and_manages_runs(
     expect(range_text).to_have_text("Showing 1–10 of 12")
     expect(page.locator("[data-page-prev]")).to_be_disabled()
     expect(run_rows.first).to_have_attribute("data-run-id", str(runs[-1]["id"]))
+    # The key metric carries its unit: the output's ppm.
+    expect(run_rows.first.locator("td.num").first).to_have_text(re.compile(r"RMSE [\d.,]+ ppm$"))
     # The sweep sits where its first run was created: before the plain runs (newest first).
     group = table.locator(f'tr[data-group-id="{sweep_id}"]')
     expect(group).to_contain_text("Noise sweep")

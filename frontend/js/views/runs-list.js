@@ -20,6 +20,8 @@ import {
   statusBadge,
   toast,
 } from "../dom.js";
+import { metricUnit } from "../metric-names.js";
+import { runQuantity } from "../quantity.js";
 import { SCOPE } from "../scopes.js";
 
 export const PAGE_SIZES = [10, 25, 50, 100];
@@ -339,11 +341,7 @@ export function runsListCard({ selectedIds, datasets, catalog, ctx }) {
       h("td", {}, h("code", { class: "tag accent", title: est?.title ?? null }, r.estimator)),
       h("td", {}, datasetName(r.dataset_id)),
       h("td", {}, statusBadge(r.status)),
-      h(
-        "td",
-        { class: "num" },
-        keyMetric ? `${metricLabel(keyMetric[0])} ${fmt(keyMetric[1])}` : "–",
-      ),
+      h("td", { class: "num" }, keyMetric ? keyMetricText(keyMetric, r, est, datasets) : "–"),
       h("td", { class: "num", "data-run-versions": "" }, String(r.n_versions ?? 0)),
       h("td", {}, fmtDate(r.created_at)),
       actions,
@@ -484,4 +482,11 @@ export function runsListCard({ selectedIds, datasets, catalog, ctx }) {
     ),
   });
   return { element, loaded, reload: load };
+}
+
+/** "Output RMSE 2.948 ppm", "ISE 2,669 N²·m²·s": the run's key metric with its unit. */
+function keyMetricText([key, value], run, est, datasets) {
+  const torque = est?.kind === "torque";
+  const unit = metricUnit(key, torque ? "N·m" : runQuantity(run, datasets).unit, { torque });
+  return `${metricLabel(key)} ${fmt(value)}${unit && unit !== "-" ? ` ${unit}` : ""}`;
 }
