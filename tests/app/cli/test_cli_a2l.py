@@ -244,12 +244,15 @@ def test_bad_values_files_exit_2_and_write_nothing(files, tmp_path, capsys, case
 
 
 def test_an_a2l_the_parser_refuses_exits_2(files, tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
-    """Past the sniff (PROJECT and MODULE are there), cut off inside a CHARACTERISTIC:
-    pya2ldb's parser refuses it, in ``a2l list`` and in ``adapt --a2l``."""
+    """Cut off inside a CHARACTERISTIC, its ends named only in a comment (so past the
+    sniff, which refuses a file without them as truncated): pya2ldb's parser refuses it, in
+    ``a2l list`` and in ``adapt --a2l``."""
     a2l, _, log = files
     text = a2l.read_bytes()
     cut = tmp_path / "cut.a2l"
-    cut.write_bytes(text[: text.index(b"/begin CHARACTERISTIC") + 40])
+    cut.write_bytes(
+        text[: text.index(b"/begin CHARACTERISTIC") + 40] + b"\n/* /end MODULE /end PROJECT */\n"
+    )
     for args in (
         ["a2l", "list", str(cut)],
         ["adapt", str(log), "--estimator", "skf", "--a2l", str(cut), "--map", ef.MAP_NAME,

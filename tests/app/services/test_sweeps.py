@@ -68,6 +68,7 @@ def test_a_random_sweep_is_seeded_and_bad_values_store_nothing(client: TestClien
     wait_group(client, f"/api/sweeps/{first['id']}")
 
     before = client.get("/api/runs", params={"limit": 1}).json()["total"]
+    sweeps = client.get("/api/sweeps").json()["total"]
     bad = client.post(
         "/api/sweeps", json=_sweep_body(dataset["id"], parameters={"sigma_w": [0.01, -1.0]})
     )
@@ -95,7 +96,7 @@ def test_a_random_sweep_is_seeded_and_bad_values_store_nothing(client: TestClien
     assert unknown.json()["error"]["field"] == "metric"
     assert "output_rmse" in unknown.json()["error"]["message"]
     assert client.get("/api/runs", params={"limit": 1}).json()["total"] == before
-    assert client.get("/api/sweeps").json()["total"] == 1
+    assert client.get("/api/sweeps").json()["total"] == sweeps
 
 
 def test_a_fleet_batch_merges_the_vehicles_maps(client: TestClient) -> None:
