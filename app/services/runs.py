@@ -21,7 +21,7 @@ from app.domain import (
     Series,
     VersionSummary,
 )
-from app.errors import ConflictError, InvalidRequestError
+from app.errors import ConflictError, InvalidRequestError, NotFoundError
 from app.io.decimate import minmax_decimate
 from app.io.names import check_name
 from app.runs.frames import StatusFrame
@@ -276,6 +276,10 @@ class RunService:
             raise InvalidRequestError("give run ids as ?runs=1,2,3", field="runs")
         out = []
         with self.db.read() as s:
-            for run_id in run_ids:
-                out.append((RunRepo(s).get(run_id), VersionRepo(s).latest(run_id)))
+            for k, run_id in enumerate(run_ids):
+                try:
+                    run = RunRepo(s).get(run_id)
+                except NotFoundError as exc:  # the query names it by its place in ?runs=
+                    raise NotFoundError(exc.message, field=f"runs[{k}]") from None
+                out.append((run, VersionRepo(s).latest(run_id)))
         return out

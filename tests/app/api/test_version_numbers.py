@@ -58,6 +58,9 @@ def test_numbers_are_1_to_n_per_run(client: TestClient, two_runs) -> None:
     kept = client.get(f"/api/runs/{run_id}/versions/{second[2]['id']}").json()
     assert kept["label"] == "x"
     compared = client.get("/api/compare", params={"runs": f"{two_runs[0]['id']},{run_id}"})
+    missing = client.get("/api/compare", params={"runs": f"{run_id},999999"})
+    assert missing.status_code == 404, missing.text
+    assert missing.json()["error"]["field"] == "runs[1]"  # the query's own name and place
     assert [r["final_version"]["number"] for r in compared.json()["runs"]] == [3, 4]
 
 
