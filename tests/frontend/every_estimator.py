@@ -117,6 +117,16 @@ def runs_from_the_form_with_its_defaults(page: Page, api: httpx.Client, estimato
         rmse_cards = page.locator('[data-metric$="rmse"]')
         for k in range(rmse_cards.count()):
             expect(rmse_cards.nth(k).locator(".u")).not_to_be_empty()
+    # θ̂2's own axis (adaptive-tv) has its own round ticks, not θ̂1's positions mapped onto it.
+    if estimator == "adaptive-tv":
+        page.locator('[data-plot="theta"] .main-svg').first.wait_for(state="attached")
+        ticks = page.eval_on_selector(
+            '[data-plot="theta"]',
+            "el => { const a = el._fullLayout.yaxis2; return [a.dtick, a._vals.map((v) => v.x)]; }",
+        )
+        step, values = float(ticks[0]), ticks[1]
+        assert values, ticks
+        assert all(abs(v / step - round(v / step)) < 1e-6 for v in values), ticks
     # A 1-D map's plots name what they show on the y axis, as a 2-D map's colour bars do.
     final = (
         run["n_versions"]

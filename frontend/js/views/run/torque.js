@@ -149,6 +149,8 @@ export function torqueViews(v) {
           overlaying: "y",
           side: "right",
           showgrid: false,
+          tickmode: "auto", // Plotly's default here, "sync", puts θ̂1's ticks on θ̂2's scale
+          nticks: 6,
           color: SERIES_COLORS[1],
         }),
         shapes: windowShape(window),
