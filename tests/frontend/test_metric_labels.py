@@ -5,7 +5,12 @@ NIS, the LPV observer's output-error statistics) and the checks an estimator has
 
 from __future__ import annotations
 
-from playwright.sync_api import Page
+import uuid
+
+from playwright.sync_api import Page, expect
+
+from tests.frontend.browser import upload_example, wait_run
+from tests.frontend.test_compare_versions_view import start_run
 
 KEYS = [
     "holdout:rmse",
@@ -46,3 +51,15 @@ def test_every_truth_free_metric_key_has_a_name_and_a_formula(page: Page) -> Non
     assert names["nis:not_applicable:no_innovation_covariance"] == (
         "NIS: n/a (no innovation covariance)"
     )
+
+
+def test_a_mean_nis_outside_its_band_says_which_way(page: Page, api) -> None:  # type: ignore[no-untyped-def]
+    """σv twenty times the NOx sensor's noise: the filter is too cautious, its mean NIS
+    falls below the 95 % band, and the card says so (docs/tuning.md#innovations)."""
+    dataset = upload_example(api, f"nis-{uuid.uuid4().hex[:8]}")
+    run = wait_run(api, start_run(api, dataset["id"], "skf", sigma_v=1000)["id"])
+    metrics = run["metrics"]
+    assert metrics["nis:mean"] < metrics["nis:mean_band_low"], metrics  # the premise
+    page.goto(f"/runs/{run['id']}")
+    card = page.locator('[data-metric="nis:mean"]')
+    expect(card.locator("[data-nis-verdict]")).to_contain_text("below: too cautious")

@@ -247,11 +247,21 @@ function metricCards(v) {
   for (const k of Object.keys(s.metrics).sort((a, b) => rank(a) - rank(b))) {
     const value = s.metrics[k];
     if (typeof value !== "number" || OWN_CARDS.has(k) || k.startsWith("nis:mean_band")) continue;
-    // NIS (docs/tuning.md): its mean is read against the 95 % band of its χ² distribution.
-    const band =
-      k === "nis:mean" && "nis:mean_band_low" in s.metrics
-        ? `95 % band ${fmt(s.metrics["nis:mean_band_low"])}–${fmt(s.metrics["nis:mean_band_high"])}`
-        : "";
+    // NIS (docs/tuning.md): its mean is read against the 95 % band of its χ² distribution,
+    // and a mean outside it says which way the noise settings are off.
+    let band = "";
+    if (k === "nis:mean" && "nis:mean_band_low" in s.metrics) {
+      const [low, high] = [s.metrics["nis:mean_band_low"], s.metrics["nis:mean_band_high"]];
+      band = `95 % band ${fmt(low)}–${fmt(high)}`;
+      const verdict =
+        value > high
+          ? "above: overconfident (σw or σv too small)"
+          : value < low
+            ? "below: too cautious (σw, σv or σf too large)"
+            : "";
+      if (verdict)
+        band = h("span", { class: "out-of-band", "data-nis-verdict": "" }, `${band}, ${verdict}`);
+    }
     cards.push(metric(k, fmtMetric(k, value), unitOf(k), band));
   }
   const rejected = rejectedTotal(s.run.rejected ?? {});
