@@ -213,3 +213,13 @@ def time_scale(column: str, unit: str) -> float:
             field=column,
         )
     return scale
+
+
+def time_column_note(time_column: str | None, names: list[str]) -> str | None:
+    """The upload's note when more than one column is named like a time base: which one the
+    time is, and that the others are kept as channels (never silently)."""
+    others = [n for n in names if n in TIME_COLUMNS and n != time_column]
+    if time_column is None or not others:
+        return None
+    listed = ", ".join(repr(n) for n in others)
+    return f"time from {time_column!r}; {listed} also named like a time base, kept as a channel"

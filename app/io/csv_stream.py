@@ -30,7 +30,7 @@ import numpy as np
 
 from app.io.csv_arrow import arrow_block
 from app.io.csv_files import CsvHeader, read_header
-from app.io.csv_sniff import head_lines
+from app.io.csv_sniff import head_lines, time_column_note
 from app.io.csv_upload import BINARY, reject_unknown_delimiter
 from app.io.ingest import BINARY_BYTES
 from app.io.names import bad_character
@@ -155,6 +155,8 @@ def stream_csv(
     )
     kept = _kept(header.names, header.time_column, channels, rate_hz, max_channels)
     notes = ["decimal comma"] if header.decimal == "," else []
+    if (note := time_column_note(header.time_column, header.names)) is not None:
+        notes.append(note)
     if header.time_column is None:
         notes.append(f"no time column: rows taken at the given rate of {rate_hz:g} Hz")
     source.seek(skip + len(text[: header.body_start].encode("utf-8")))

@@ -14,7 +14,7 @@ import re
 from collections.abc import Mapping
 
 from app.io.csv_files import SparseCsv, parse_sparse_csv
-from app.io.csv_sniff import DELIMITERS, TIME_COLUMNS, split_lines
+from app.io.csv_sniff import DELIMITERS, TIME_COLUMNS, split_lines, time_column_note
 from app.io.errors import InputError, unsupported
 
 BINARY = re.compile(r"[\x00-\x08\x0b\x0e-\x1f\x7f]")
@@ -54,6 +54,8 @@ def read_csv_upload(
     )
     if log.decimal == ",":
         notes.append("decimal comma")
+    if (note := time_column_note(log.time_column, list(log.columns))) is not None:
+        notes.append(note)
     if log.time_column is not None:
         if rate_hz is not None:
             raise InputError(
@@ -68,7 +70,8 @@ def read_csv_upload(
     elif time_required:
         raise InputError(
             "the file has no time column (one of "
-            f"{', '.join(TIME_COLUMNS)}, in seconds); add one, or give the rows' sample "
+            f"{', '.join(TIME_COLUMNS)}, in s unless its unit says ms, us, ns, min or h); add "
+            "one, or give the rows' sample "
             "rate as rate_hz",
             field="time",
             line=None,

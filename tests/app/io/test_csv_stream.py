@@ -134,6 +134,7 @@ CASES: dict[str, Callable[[], bytes]] = {
     ).encode(),
     "tab": lambda: _text(_rows(), "time\tn [rpm]\tq [mg]\tz", sep="\t").encode(),
     "time in ms": lambda: _text(_rows() * [1e3, 1, 1, 1], "time [ms],n,q,z").encode(),
+    "a second time-like column": lambda: _text(_rows(), "time,n,t,z").encode(),  # notes agree
     "utf-8 header with a BOM": lambda: (
         b"\xef\xbb\xbf" + _text(_rows(), "time [s],T [°C],q [mg],z").encode()
     ),

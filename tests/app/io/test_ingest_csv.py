@@ -413,3 +413,11 @@ def test_a_unit_with_a_control_or_formatting_character_is_refused(
     with pytest.raises(InputError, match="the unit of column 'a'") as info:
         ingest(data, units=units)
     assert info.value.field == "a"
+
+
+def test_a_second_column_named_like_a_time_base_is_kept_and_noted() -> None:
+    ds = ingest(b"time_s,t,x\n0,5,1\n0.5,6,2\n1,7,3\n")
+    assert ds.time_column == "time_s"
+    assert ds.signals.names == ["t", "x"]
+    assert "time from 'time_s'; 't' also named like a time base, kept as a channel" in ds.notes
+    assert not any("time base" in n for n in ingest(b"time,x\n0,1\n1,2\n").notes)
