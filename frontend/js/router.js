@@ -131,15 +131,22 @@ export class Router {
   }
 }
 
+/** A view that could not load: a heading (focused like any page's), why, and a way on. */
 function errorPanel(err) {
+  const missing = err?.status === 404;
+  const h1 = document.createElement("h1");
+  h1.textContent = missing ? "Not found" : "Something went wrong";
+  h1.tabIndex = -1;
+  h1.dataset.pageTitle = "";
   const p = document.createElement("div");
   p.className = "banner error";
   p.setAttribute("role", "alert");
-  p.textContent =
-    err?.status === 404
-      ? `Not found: ${err.message}`
-      : `Something went wrong: ${err?.message ?? err}`;
-  return p;
+  p.textContent = missing ? `Not found: ${err.message}` : `${err?.message ?? err}`;
+  const on = document.createElement("p");
+  on.innerHTML = 'Go to the <a href="/compare">runs</a> or the <a href="/datasets">datasets</a>.';
+  const panel = document.createDocumentFragment();
+  panel.append(h1, p, on);
+  return panel;
 }
 
 const notFound = {

@@ -193,6 +193,17 @@ def test_an_unknown_address_shows_not_found_in_the_dashboard(page: Page) -> None
     expect(page).to_have_url(re.compile(r"/datasets$"))
 
 
+def test_a_run_that_is_not_there_has_a_heading_and_a_way_on(page: Page, console: Console) -> None:
+    """/runs/999999 once showed only a bare banner: no heading, no link."""
+    console.allow(r"status of 404")
+    page.goto("/runs/999999")
+    heading = page.get_by_role("heading", name="Not found", exact=True)
+    expect(heading).to_be_visible()
+    expect(page.get_by_role("alert")).to_contain_text("999999")
+    page.locator("#main").get_by_role("link", name="runs").click()
+    expect(page).to_have_url(re.compile(r"/compare$"))
+
+
 def test_versions_names_a_run_that_is_not_there(page: Page, api) -> None:
     dataset = upload_example(api, f"versions-{uuid.uuid4().hex[:8]}")
     wait_run(api, start_run(api, dataset["id"])["id"])
