@@ -254,15 +254,6 @@ class SweepService:
     def create_batch(self, request: BatchRequest) -> GroupView:
         self.runs.need_executor()
         name = _group_name(request.name)
-        seen: dict[int, int] = {}
-        for i, dataset_id in enumerate(request.dataset_ids):
-            if dataset_id in seen:  # the merge would weigh one vehicle twice
-                raise InvalidRequestError(
-                    f"dataset {dataset_id} is listed twice (at {seen[dataset_id]} and {i}); "
-                    "a batch merges one log per vehicle",
-                    field=f"dataset_ids[{i}]",
-                )
-            seen[dataset_id] = i
         table = None if request.table is None else request.table.model_dump(mode="json")
         with self.db.write() as s:
             group = GroupRepo(s).add(
