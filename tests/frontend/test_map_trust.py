@@ -119,8 +119,11 @@ def test_map_run_shows_unvisited_hits_and_error(page: Page, api, nox_run: dict) 
     assert "hits [samples]" in titles
     assert "estimated − true [ppm]" in titles
 
-    # Hover on a cell: value, visits and variance with their units.
-    box = page.locator('[data-plot="map"] .nsewdrag').first.bounding_box()
+    # Hover on a cell: value, visits and variance with their units (the map scrolled into
+    # view first: the metric cards above it may push it below the fold).
+    drag = page.locator('[data-plot="map"] .nsewdrag').first
+    drag.scroll_into_view_if_needed()
+    box = drag.bounding_box()
     page.mouse.move(box["x"] + box["width"] * 0.25, box["y"] + box["height"] * 0.9)
     hover = page.locator('[data-plot="map"] .hoverlayer')
     expect(hover).to_contain_text("ppm")
