@@ -20,8 +20,8 @@ from estimation.errors import SignalError
 
 TIME_COLUMNS = ("time", "time_s", "t", "timestamp", "timestamps")  # the last: asammdf's exports
 DELIMITERS = ",;\t"
-# The units a time column may be in, and their length in seconds (any case but µs/us/ns/ms
-# as written; "" is seconds, what a header without a unit means).
+# The units a time column may be in, and their length in seconds (looked up as written,
+# then in lower case; "" is seconds, what a header without a unit means).
 TIME_UNITS_S = {
     "": 1.0, "s": 1.0, "sec": 1.0, "secs": 1.0, "second": 1.0, "seconds": 1.0,
     "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "μs": 1e-6, "ns": 1e-9,
